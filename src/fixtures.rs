@@ -1,0 +1,1 @@
+//! Procedural meshes with known answers (being written).

@@ -1,0 +1,273 @@
+//! Pure measures on a [`Mesh`]: corner angles, angle sums θ, flattenability ϖ, D[M], G[M],
+//! discrete Gaussian curvature, areas, normals, and the analytic gradients of θ.
+//!
+//! Conventions (wang-tang paper, Eq. 2 and 5): only a vertex whose closed fan lies in one patch
+//! is interior; everywhere else g = 0 and ϖ = 0. A vertex counts as developable for D[M] when
+//! ϖ ≤ [`DEVELOPABLE_TOLERANCE`].
+
+use crate::mesh::{cross, dot, sub, Mesh, VertexKind};
+use std::f64::consts::{PI, TAU};
+
+/// ϖ at or below this many radians counts as a developable point in D[M] (Eq. 2). It is the
+/// tolerance the FL-mesh solver drives ϖ_max to, and far above the ~1e-13 rad noise of summing
+/// a dozen f64 angles.
+pub const DEVELOPABLE_TOLERANCE: f64 = 1e-6;
+
+/// The angle at `a` in triangle (a, b, c), in [0, π]. `atan2(|e1×e2|, e1·e2)` keeps full
+/// relative precision near 0 and π, where `acos` of a dot product loses half the digits.
+#[inline]
+pub fn corner_angle(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> f64 {
+    let e1 = sub(b, a);
+    let e2 = sub(c, a);
+    let n = cross(e1, e2);
+    dot(n, n).sqrt().atan2(dot(e1, e2))
+}
+
+/// The three corner angles of every face.
+pub fn corner_angles(mesh: &Mesh) -> Vec<[f64; 3]> {
+    (0..mesh.num_faces())
+        .map(|f| {
+            let [a, b, c] = mesh.face_positions(f);
+            [
+                corner_angle(a, b, c),
+                corner_angle(b, c, a),
+                corner_angle(c, a, b),
+            ]
+        })
+        .collect()
+}
+
+/// θ(v): the sum of the corner angles at each vertex over all its faces (0 when unreferenced).
+pub fn angle_sums(mesh: &Mesh) -> Vec<f64> {
+    let mut theta = vec![0.0; mesh.num_vertices()];
+    for (t, ang) in mesh.triangles().iter().zip(corner_angles(mesh)) {
+        for k in 0..3 {
+            theta[t[k] as usize] += ang[k];
+        }
+    }
+    theta
+}
+
+/// θ(v) for one vertex, from its fan.
+pub fn angle_sum_at(mesh: &Mesh, v: u32) -> f64 {
+    let p = mesh.position(v);
+    mesh.conn()
+        .fan_of(v)
+        .iter()
+        .map(|&h| {
+            let t = mesh.triangles()[h as usize / 3];
+            let k = h as usize % 3;
+            corner_angle(
+                p,
+                mesh.position(t[(k + 1) % 3]),
+                mesh.position(t[(k + 2) % 3]),
+            )
+        })
+        .sum()
+}
+
+/// ϖ(v) = |2π − θ(v)| at interior vertices, 0 elsewhere (Eq. 5: g = 0 on the boundary).
+pub fn flattenability(mesh: &Mesh, theta: &[f64]) -> Vec<f64> {
+    mesh.conn()
+        .kinds()
+        .iter()
+        .zip(theta)
+        .map(|(k, &t)| {
+            if *k == VertexKind::Interior {
+                (TAU - t).abs()
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
+/// Area of every face.
+pub fn face_areas(mesh: &Mesh) -> Vec<f64> {
+    (0..mesh.num_faces())
+        .map(|f| {
+            let [a, b, c] = mesh.face_positions(f);
+            let n = cross(sub(b, a), sub(c, a));
+            0.5 * dot(n, n).sqrt()
+        })
+        .collect()
+}
+
+/// A_q = ⅓ Σ A_j over the faces at each vertex (Eq. 1–2); these sum to the mesh area.
+pub fn vertex_areas(mesh: &Mesh, face_area: &[f64]) -> Vec<f64> {
+    let mut a = vec![0.0; mesh.num_vertices()];
+    for (t, &fa) in mesh.triangles().iter().zip(face_area) {
+        for &v in t {
+            a[v as usize] += fa / 3.0;
+        }
+    }
+    a
+}
+
+/// Discrete Gaussian curvature κ = (2π − θ) / (⅓ Σ A_j) (Eq. 1) at every vertex with a closed
+/// fan (interior and seam vertices); `None` on the free boundary and at unreferenced vertices.
+pub fn gaussian_curvature(mesh: &Mesh, theta: &[f64], vertex_area: &[f64]) -> Vec<Option<f64>> {
+    mesh.conn()
+        .kinds()
+        .iter()
+        .enumerate()
+        .map(|(v, k)| match k {
+            VertexKind::Interior | VertexKind::Seam => Some((TAU - theta[v]) / vertex_area[v]),
+            _ => None,
+        })
+        .collect()
+}
+
+/// D[M] (Eq. 2): the area-weighted share of developable points, boundary vertices counting as
+/// developable (θ_sum := 2π there). In [0, 1]; 1 means every interior vertex has
+/// ϖ ≤ `tolerance`.
+pub fn developability_d(varpi: &[f64], vertex_area: &[f64], tolerance: f64) -> f64 {
+    let total: f64 = vertex_area.iter().sum();
+    if total <= 0.0 {
+        return 1.0;
+    }
+    let dev: f64 = varpi
+        .iter()
+        .zip(vertex_area)
+        .filter(|(w, _)| **w <= tolerance)
+        .map(|(_, a)| a)
+        .sum();
+    (dev / total).clamp(0.0, 1.0)
+}
+
+/// G[M] = Σ g(q)² (Eq. 4–5), g = 2π − θ at interior vertices and 0 elsewhere.
+pub fn developability_g(varpi: &[f64]) -> f64 {
+    varpi.iter().map(|w| w * w).sum()
+}
+
+/// Unit normal of every face (counter-clockwise = front).
+pub fn face_normals(mesh: &Mesh) -> Vec<[f64; 3]> {
+    (0..mesh.num_faces())
+        .map(|f| {
+            let [a, b, c] = mesh.face_positions(f);
+            normalize(cross(sub(b, a), sub(c, a)))
+        })
+        .collect()
+}
+
+/// Angle-weighted unit vertex normals (independent of how a fan is triangulated); zero at
+/// unreferenced vertices.
+pub fn vertex_normals(mesh: &Mesh) -> Vec<[f64; 3]> {
+    let mut n = vec![[0.0; 3]; mesh.num_vertices()];
+    let fnrm = face_normals(mesh);
+    for ((t, ang), fnv) in mesh.triangles().iter().zip(corner_angles(mesh)).zip(&fnrm) {
+        for k in 0..3 {
+            let v = &mut n[t[k] as usize];
+            for i in 0..3 {
+                v[i] += ang[k] * fnv[i];
+            }
+        }
+    }
+    n.into_iter().map(normalize).collect()
+}
+
+/// `v / |v|`, or zero for a zero vector (never NaN).
+#[inline]
+pub fn normalize(v: [f64; 3]) -> [f64; 3] {
+    let l = dot(v, v).sqrt();
+    if l > 0.0 && l.is_finite() {
+        [v[0] / l, v[1] / l, v[2] / l]
+    } else {
+        [0.0; 3]
+    }
+}
+
+/// Gradient of the corner angle at `a` in triangle (a, b, c) with respect to `b` and to `c`.
+/// The angle grows when `b` moves in the plane away from `c`, at rate 1/|ab|; the gradient with
+/// respect to `a` is minus their sum. Written with the face normal instead of 1/sin, so it stays
+/// accurate for angles near 0 and π.
+#[inline]
+pub fn corner_angle_gradient(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> ([f64; 3], [f64; 3]) {
+    let e1 = sub(b, a);
+    let e2 = sub(c, a);
+    let n = cross(e1, e2);
+    let nn = dot(n, n).sqrt();
+    let d1 = nn * dot(e1, e1);
+    let d2 = nn * dot(e2, e2);
+    let g1 = cross(n, e1);
+    let g2 = cross(n, e2);
+    (
+        [-g1[0] / d1, -g1[1] / d1, -g1[2] / d1],
+        [g2[0] / d2, g2[1] / d2, g2[2] / d2],
+    )
+}
+
+/// Analytic gradient of θ(q) with respect to q itself (Prop. 1, Eq. 12) and to each
+/// neighbour p (Prop. 2, Eq. 13). Writes `(vertex, gradient)` pairs into `out`: first q, then
+/// its ring neighbours in counter-clockwise order.
+///
+/// Summing [`corner_angle_gradient`] over q's fan gives exactly the paper's expressions: for a
+/// neighbour p the two corners at q beside edge qp contribute
+/// `(cot ξ + cot γ)/|pq|² (p − q) − (q₊ − q)/(|pq||q₊q| sin ξ) − (q₋ − q)/(|pq||q₋q| sin γ)`
+/// (Eq. 13), and for q itself the 1/sin terms cancel (Appendix B), leaving
+/// `Σ (cot ξ + cot γ)/|pq|² (p − q)`. Eq. 12 as printed divides by |pq| only; Appendix B's
+/// derivation and finite differences (tests/gradients.rs) both give |pq|².
+pub fn theta_gradient(mesh: &Mesh, q: u32, out: &mut Vec<(u32, [f64; 3])>) {
+    out.clear();
+    let conn = mesh.conn();
+    let ring = conn.ring_of(q);
+    out.push((q, [0.0; 3]));
+    out.extend(ring.iter().map(|&p| (p, [0.0; 3])));
+    let closed = ring.len() == conn.fan_of(q).len();
+    let pq = mesh.position(q);
+    let n = ring.len();
+    for (j, &h) in conn.fan_of(q).iter().enumerate() {
+        let t = mesh.triangles()[h as usize / 3];
+        let k = h as usize % 3;
+        let (b, c) = (t[(k + 1) % 3], t[(k + 2) % 3]);
+        let (gb, gc) = corner_angle_gradient(pq, mesh.position(b), mesh.position(c));
+        // Face j spans ring[j] -> ring[j+1].
+        let jb = 1 + j;
+        let jc = 1 + if closed { (j + 1) % n } else { j + 1 };
+        debug_assert_eq!(out[jb].0, b);
+        debug_assert_eq!(out[jc].0, c);
+        for i in 0..3 {
+            out[jb].1[i] += gb[i];
+            out[jc].1[i] += gc[i];
+            out[0].1[i] -= gb[i] + gc[i];
+        }
+    }
+}
+
+/// Sum of the turning (π − θ) at the boundary vertices of a patch plus the angle defects
+/// (2π − θ) at its other vertices, with θ taken over the patch's faces only. By Gauss–Bonnet
+/// this equals 2π χ(patch) exactly for any triangle mesh; tests use it as an independent check.
+pub fn patch_total_curvature(mesh: &Mesh, patch: u32) -> f64 {
+    let topo = &mesh.conn().patches()[patch as usize];
+    let mut theta = vec![0.0f64; mesh.num_vertices()];
+    let mut used = vec![false; mesh.num_vertices()];
+    for &f in &topo.faces {
+        let t = mesh.triangles()[f as usize];
+        let [a, b, c] = mesh.face_positions(f as usize);
+        let ang = [
+            corner_angle(a, b, c),
+            corner_angle(b, c, a),
+            corner_angle(c, a, b),
+        ];
+        for k in 0..3 {
+            theta[t[k] as usize] += ang[k];
+            used[t[k] as usize] = true;
+        }
+    }
+    let mut on_boundary = vec![0usize; mesh.num_vertices()];
+    for lp in &topo.boundary_loops {
+        for &v in lp {
+            on_boundary[v as usize] += 1;
+        }
+    }
+    let mut total = 0.0;
+    for v in 0..mesh.num_vertices() {
+        if !used[v] {
+            continue;
+        }
+        // A vertex on k boundary wedges of the patch contributes 2π − θ − kπ (k = 0 inside,
+        // k = 1 the turning π − θ); with this count the identity holds even at pinches.
+        total += TAU - theta[v] - PI * on_boundary[v] as f64;
+    }
+    total
+}

@@ -1,0 +1,131 @@
+//! Readers and writers: OBJ, OFF, glTF 2.0 (`.gltf` with embedded buffers, `.glb`).
+//!
+//! Readers meet untrusted bytes: they never panic and never allocate more than a small
+//! multiple of the input's size. They produce a [`RawMesh`]; [`load`] validates it into a
+//! [`Mesh`].
+
+pub mod gltf;
+pub mod obj;
+pub mod off;
+
+use crate::mesh::{Mesh, MeshError, RawMesh, Warning};
+use std::path::Path;
+
+/// A mesh file format.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Format {
+    /// Wavefront OBJ.
+    Obj,
+    /// Object File Format.
+    Off,
+    /// glTF 2.0 JSON with embedded `data:` buffers.
+    Gltf,
+    /// Binary glTF 2.0.
+    Glb,
+}
+
+impl Format {
+    /// The format named by a file extension (case-insensitive).
+    pub fn from_extension(ext: &str) -> Option<Format> {
+        match ext.to_ascii_lowercase().as_str() {
+            "obj" => Some(Format::Obj),
+            "off" => Some(Format::Off),
+            "gltf" => Some(Format::Gltf),
+            "glb" => Some(Format::Glb),
+            _ => None,
+        }
+    }
+
+    /// The format of a path, by extension, else by content.
+    pub fn of_path(path: &Path, bytes: &[u8]) -> Option<Format> {
+        path.extension()
+            .and_then(|e| e.to_str())
+            .and_then(Format::from_extension)
+            .or_else(|| Format::sniff(bytes))
+    }
+
+    /// Guess the format from the first bytes.
+    pub fn sniff(bytes: &[u8]) -> Option<Format> {
+        if bytes.starts_with(b"glTF") {
+            return Some(Format::Glb);
+        }
+        let head = &bytes[..bytes.len().min(4096)];
+        let text = String::from_utf8_lossy(head);
+        let t = text.trim_start_matches('\u{feff}').trim_start();
+        if t.starts_with('{') {
+            return Some(Format::Gltf);
+        }
+        if t.starts_with("OFF") || t.starts_with("COFF") || t.starts_with("NOFF") {
+            return Some(Format::Off);
+        }
+        if t.lines().any(|l| {
+            let l = l.trim_start();
+            l.starts_with("v ") || l.starts_with("f ") || l.starts_with('#')
+        }) {
+            return Some(Format::Obj);
+        }
+        None
+    }
+
+    /// The usual extension.
+    pub fn extension(self) -> &'static str {
+        match self {
+            Format::Obj => "obj",
+            Format::Off => "off",
+            Format::Gltf => "gltf",
+            Format::Glb => "glb",
+        }
+    }
+}
+
+/// Why a file could not be read. Every variant says where.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ReadError {
+    /// A text format's syntax error.
+    #[error("{format} line {line}: {message}")]
+    Syntax {
+        /// `OBJ` or `OFF`.
+        format: &'static str,
+        /// 1-based line number.
+        line: usize,
+        /// What is wrong.
+        message: String,
+    },
+    /// A glTF problem, with the JSON path or element concerned.
+    #[error("glTF: {0}")]
+    Gltf(String),
+    /// The format could not be recognised.
+    #[error("unrecognised mesh format (expected .obj, .off, .gltf or .glb)")]
+    UnknownFormat,
+    /// The geometry was read but is not a valid mesh.
+    #[error(transparent)]
+    Mesh(#[from] MeshError),
+    /// The file could not be read.
+    #[error("{0}")]
+    Io(String),
+}
+
+/// Parse bytes of a known format into raw mesh data.
+pub fn read(bytes: &[u8], format: Format) -> Result<(RawMesh, Vec<Warning>), ReadError> {
+    match format {
+        Format::Obj => obj::read(bytes),
+        Format::Off => off::read(bytes),
+        Format::Gltf | Format::Glb => gltf::read(bytes),
+    }
+}
+
+/// Parse and validate: the one entry point from bytes to a [`Mesh`].
+pub fn load(bytes: &[u8], format: Format) -> Result<(Mesh, Vec<Warning>), ReadError> {
+    let (raw, mut warnings) = read(bytes, format)?;
+    let (mesh, w) = Mesh::new(raw)?;
+    warnings.extend(w);
+    Ok((mesh, warnings))
+}
+
+/// Read and validate a mesh file, choosing the format by extension or content.
+pub fn load_path(path: &Path) -> Result<(Mesh, Vec<Warning>), ReadError> {
+    let bytes =
+        std::fs::read(path).map_err(|e| ReadError::Io(format!("{}: {e}", path.display())))?;
+    let format = Format::of_path(path, &bytes).ok_or(ReadError::UnknownFormat)?;
+    load(&bytes, format)
+}

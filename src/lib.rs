@@ -1,0 +1,12 @@
+//! flatmesh: measure, optimise and flatten developable (flattenable) triangle meshes.
+//!
+//! Layers (../shared/DESIGN.md): data flows one way, bytes → [`mesh`] → algorithms →
+//! outcome → bytes. [`geometry`] holds pure measures, [`report`] the plain report type,
+//! [`io`] the readers and writers, [`fixtures`] procedural meshes with known answers.
+#![warn(missing_docs)]
+
+pub mod fixtures;
+pub mod geometry;
+pub mod io;
+pub mod mesh;
+pub mod report;

@@ -1,0 +1,500 @@
+//! The one mesh type: f64 positions, u32 triangles, a patch id per face.
+//!
+//! A [`Mesh`] is only ever built through [`Mesh::new`], which validates the input and builds
+//! the [`Connectivity`] once. Connectivity is immutable and shared (`Arc`) between meshes that
+//! differ only in vertex positions ([`Mesh::with_positions`]), which is what every optimiser
+//! produces.
+//!
+//! What is fatal and what is repaired (a user's vertex indices are never renumbered, so that
+//! reports can be matched to the file):
+//!
+//! | problem | decision |
+//! |---|---|
+//! | no faces | fatal [`MeshError::Empty`] |
+//! | index out of range | fatal, names face and corner |
+//! | NaN/∞ coordinate | fatal, names vertex and axis |
+//! | triangle with a repeated index or zero area | fatal, names the face |
+//! | edge with more than two faces | fatal, names the edge and its faces |
+//! | vertex with more than one fan (bow-tie) | fatal, names the vertex |
+//! | duplicate face (same three vertices) | fatal, names both faces |
+//! | inconsistent orientation, orientable component | repaired: faces flipped to agree with the lowest-numbered face of their component, with a warning |
+//! | non-orientable component | fatal, names an edge where orientation cannot agree |
+//! | unreferenced vertex | kept (indices stay the file's) but ignored by every measure, with a warning |
+
+mod connectivity;
+
+pub use connectivity::{Connectivity, PatchTopology, VertexKind, NONE};
+
+use serde::Serialize;
+use std::sync::Arc;
+
+/// Index of a vertex.
+pub type VertexId = u32;
+/// Index of a triangle.
+pub type FaceId = u32;
+
+/// A triangle counts as degenerate when twice its area is at most this fraction of its
+/// longest edge squared, i.e. its smallest angle is below about 1e-12 rad: below that, angles
+/// and their gradients lose all precision.
+pub const DEGENERATE_REL_AREA: f64 = 1e-12;
+
+/// Mesh data as a reader produces it, before validation.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RawMesh {
+    /// Vertex positions.
+    pub positions: Vec<[f64; 3]>,
+    /// Triangles as vertex indices, counter-clockwise seen from the front.
+    pub triangles: Vec<[u32; 3]>,
+    /// Patch id of each triangle (index into `patch_names`).
+    pub face_patch: Vec<u32>,
+    /// Patch names; at least one when there are faces.
+    pub patch_names: Vec<String>,
+    /// Optional texture coordinates, kept so that a file's own flat pattern (OBJ `vt`) can be
+    /// compared with ours.
+    pub uv: Option<UvLayer>,
+}
+
+/// Texture coordinates indexed per triangle corner (OBJ `vt`, glTF TEXCOORD_0).
+#[derive(Debug, Clone, PartialEq)]
+pub struct UvLayer {
+    /// The coordinates.
+    pub coords: Vec<[f64; 2]>,
+    /// For each triangle, the index into `coords` of each corner.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+/// Something repaired or ignored on the way in; carried into every report.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct Warning {
+    /// Stable machine-readable code, e.g. `unreferenced_vertices`.
+    pub code: &'static str,
+    /// Human-readable detail naming the elements concerned.
+    pub message: String,
+}
+
+impl Warning {
+    /// A warning with the given code and message.
+    pub fn new(code: &'static str, message: impl Into<String>) -> Self {
+        Self {
+            code,
+            message: message.into(),
+        }
+    }
+}
+
+/// Why a mesh was refused. Every variant names the element at fault.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MeshError {
+    /// The mesh has no triangles.
+    #[error("the mesh has no faces")]
+    Empty,
+    /// Array lengths disagree (a reader bug or malformed input).
+    #[error("{what}")]
+    Inconsistent {
+        /// What disagrees.
+        what: String,
+    },
+    /// A triangle refers to a vertex that does not exist.
+    #[error("face {face} corner {corner} refers to vertex {index}, but there are only {vertices} vertices")]
+    IndexOutOfRange {
+        /// Face index.
+        face: usize,
+        /// Corner 0..3.
+        corner: usize,
+        /// The offending index.
+        index: u32,
+        /// Number of vertices.
+        vertices: usize,
+    },
+    /// A triangle's patch id is not a known patch.
+    #[error("face {face} has patch id {patch}, but there are only {patches} patches")]
+    PatchOutOfRange {
+        /// Face index.
+        face: usize,
+        /// The offending patch id.
+        patch: u32,
+        /// Number of patches.
+        patches: usize,
+    },
+    /// A coordinate is NaN or infinite.
+    #[error("vertex {vertex} has a non-finite {axis} coordinate ({value})")]
+    NonFinite {
+        /// Vertex index.
+        vertex: usize,
+        /// `x`, `y` or `z`.
+        axis: char,
+        /// The value.
+        value: f64,
+    },
+    /// A triangle has a repeated vertex or (numerically) zero area.
+    #[error("face {face} (vertices {} {} {}) is degenerate: {reason}", .vertices[0], .vertices[1], .vertices[2])]
+    DegenerateFace {
+        /// Face index.
+        face: usize,
+        /// Its vertices.
+        vertices: [u32; 3],
+        /// `repeated vertex` or `zero area`.
+        reason: &'static str,
+    },
+    /// Two faces use the same three vertices.
+    #[error("face {face} duplicates face {first} (vertices {} {} {})", .vertices[0], .vertices[1], .vertices[2])]
+    DuplicateFace {
+        /// The later face.
+        face: usize,
+        /// The earlier face with the same vertices.
+        first: usize,
+        /// The vertices.
+        vertices: [u32; 3],
+    },
+    /// An edge is shared by more than two faces.
+    #[error("non-manifold edge {a}-{b}: shared by {} faces ({})", .faces.len(), join(.faces))]
+    NonManifoldEdge {
+        /// Lower vertex of the edge.
+        a: u32,
+        /// Higher vertex of the edge.
+        b: u32,
+        /// All faces on the edge.
+        faces: Vec<u32>,
+    },
+    /// A vertex's faces form more than one fan (a bow-tie).
+    #[error("non-manifold vertex {vertex}: its faces form {fans} separate fans")]
+    NonManifoldVertex {
+        /// Vertex index.
+        vertex: u32,
+        /// Number of fans.
+        fans: usize,
+    },
+    /// A connected component cannot be consistently oriented (e.g. a Möbius strip).
+    #[error("non-orientable surface: faces {f0} and {f1} cannot agree in orientation across edge {a}-{b}")]
+    NonOrientable {
+        /// Lower vertex of the edge.
+        a: u32,
+        /// Higher vertex of the edge.
+        b: u32,
+        /// One face.
+        f0: u32,
+        /// The other face.
+        f1: u32,
+    },
+}
+
+fn join(v: &[u32]) -> String {
+    v.iter()
+        .map(|x| x.to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// A validated triangle mesh with immutable connectivity.
+#[derive(Debug, Clone)]
+pub struct Mesh {
+    positions: Vec<[f64; 3]>,
+    triangles: Arc<Vec<[u32; 3]>>,
+    face_patch: Arc<Vec<u32>>,
+    patch_names: Arc<Vec<String>>,
+    uv: Option<Arc<UvLayer>>,
+    conn: Arc<Connectivity>,
+}
+
+impl Mesh {
+    /// Validate `raw` and build its connectivity. Returns the mesh and what was repaired.
+    pub fn new(raw: RawMesh) -> Result<(Mesh, Vec<Warning>), MeshError> {
+        let RawMesh {
+            positions,
+            mut triangles,
+            mut face_patch,
+            mut patch_names,
+            uv,
+        } = raw;
+        if triangles.is_empty() {
+            return Err(MeshError::Empty);
+        }
+        if face_patch.is_empty() {
+            face_patch = vec![0; triangles.len()];
+        }
+        if patch_names.is_empty() {
+            patch_names.push("default".to_string());
+        }
+        if face_patch.len() != triangles.len() {
+            return Err(MeshError::Inconsistent {
+                what: format!(
+                    "{} patch ids for {} faces",
+                    face_patch.len(),
+                    triangles.len()
+                ),
+            });
+        }
+        let nv = positions.len();
+        for (f, t) in triangles.iter().enumerate() {
+            for (c, &i) in t.iter().enumerate() {
+                if i as usize >= nv {
+                    return Err(MeshError::IndexOutOfRange {
+                        face: f,
+                        corner: c,
+                        index: i,
+                        vertices: nv,
+                    });
+                }
+            }
+            let p = face_patch[f];
+            if p as usize >= patch_names.len() {
+                return Err(MeshError::PatchOutOfRange {
+                    face: f,
+                    patch: p,
+                    patches: patch_names.len(),
+                });
+            }
+        }
+        if let Some(uv) = &uv {
+            if uv.triangles.len() != triangles.len() {
+                return Err(MeshError::Inconsistent {
+                    what: format!(
+                        "{} texture triangles for {} faces",
+                        uv.triangles.len(),
+                        triangles.len()
+                    ),
+                });
+            }
+            if let Some((f, _)) = uv
+                .triangles
+                .iter()
+                .enumerate()
+                .find(|(_, t)| t.iter().any(|&i| i as usize >= uv.coords.len()))
+            {
+                return Err(MeshError::Inconsistent {
+                    what: format!("face {f} refers to a texture coordinate that does not exist"),
+                });
+            }
+        }
+        check_finite(&positions)?;
+        check_faces(&positions, &triangles)?;
+        let mut warnings = Vec::new();
+        compact_patches(&mut face_patch, &mut patch_names, &mut warnings);
+        let conn = Connectivity::build(
+            nv,
+            &mut triangles,
+            &face_patch,
+            patch_names.len(),
+            &mut warnings,
+        )?;
+        let mesh = Mesh {
+            positions,
+            triangles: Arc::new(triangles),
+            face_patch: Arc::new(face_patch),
+            patch_names: Arc::new(patch_names),
+            uv: uv.map(Arc::new),
+            conn: Arc::new(conn),
+        };
+        Ok((mesh, warnings))
+    }
+
+    /// The same mesh with new vertex positions (connectivity shared). Fails, naming the
+    /// element, when a position is not finite or a face became degenerate.
+    pub fn with_positions(&self, positions: Vec<[f64; 3]>) -> Result<Mesh, MeshError> {
+        if positions.len() != self.positions.len() {
+            return Err(MeshError::Inconsistent {
+                what: format!(
+                    "{} positions for a mesh of {} vertices",
+                    positions.len(),
+                    self.positions.len()
+                ),
+            });
+        }
+        check_finite(&positions)?;
+        check_faces(&positions, &self.triangles)?;
+        Ok(Mesh {
+            positions,
+            ..self.clone_shallow()
+        })
+    }
+
+    fn clone_shallow(&self) -> Mesh {
+        Mesh {
+            positions: Vec::new(),
+            triangles: self.triangles.clone(),
+            face_patch: self.face_patch.clone(),
+            patch_names: self.patch_names.clone(),
+            uv: self.uv.clone(),
+            conn: self.conn.clone(),
+        }
+    }
+
+    /// Vertex positions.
+    pub fn positions(&self) -> &[[f64; 3]] {
+        &self.positions
+    }
+    /// Triangles (after any orientation repair).
+    pub fn triangles(&self) -> &[[u32; 3]] {
+        &self.triangles
+    }
+    /// Patch id of each face.
+    pub fn face_patch(&self) -> &[u32] {
+        &self.face_patch
+    }
+    /// Patch names, indexed by patch id.
+    pub fn patch_names(&self) -> &[String] {
+        &self.patch_names
+    }
+    /// Texture coordinates, when the input had them.
+    pub fn uv(&self) -> Option<&UvLayer> {
+        self.uv.as_deref()
+    }
+    /// Connectivity (built once).
+    pub fn conn(&self) -> &Connectivity {
+        &self.conn
+    }
+    /// Number of vertices (including unreferenced ones).
+    pub fn num_vertices(&self) -> usize {
+        self.positions.len()
+    }
+    /// Number of triangles.
+    pub fn num_faces(&self) -> usize {
+        self.triangles.len()
+    }
+    /// Number of patches.
+    pub fn num_patches(&self) -> usize {
+        self.patch_names.len()
+    }
+    /// Position of vertex `v`.
+    #[inline]
+    pub fn position(&self, v: u32) -> [f64; 3] {
+        self.positions[v as usize]
+    }
+    /// The three positions of face `f`.
+    #[inline]
+    pub fn face_positions(&self, f: usize) -> [[f64; 3]; 3] {
+        let t = self.triangles[f];
+        [
+            self.positions[t[0] as usize],
+            self.positions[t[1] as usize],
+            self.positions[t[2] as usize],
+        ]
+    }
+    /// Back to raw data (e.g. for writing).
+    pub fn to_raw(&self) -> RawMesh {
+        RawMesh {
+            positions: self.positions.clone(),
+            triangles: self.triangles.to_vec(),
+            face_patch: self.face_patch.to_vec(),
+            patch_names: self.patch_names.to_vec(),
+            uv: self.uv.as_deref().cloned(),
+        }
+    }
+    /// Axis-aligned bounding box of the referenced vertices.
+    pub fn bbox(&self) -> ([f64; 3], [f64; 3]) {
+        bbox_of(
+            self.conn
+                .referenced_vertices()
+                .map(|v| self.positions[v as usize]),
+        )
+    }
+}
+
+/// Drop patches that have no faces (harmless, but worth a warning) so every patch has faces.
+fn compact_patches(face_patch: &mut [u32], patch_names: &mut Vec<String>, warnings: &mut Vec<Warning>) {
+    let mut used = vec![false; patch_names.len()];
+    for &p in face_patch.iter() {
+        used[p as usize] = true;
+    }
+    if used.iter().all(|&u| u) {
+        return;
+    }
+    let empty: Vec<&str> = patch_names
+        .iter()
+        .zip(&used)
+        .filter(|(_, u)| !**u)
+        .map(|(n, _)| n.as_str())
+        .collect();
+    warnings.push(Warning::new(
+        "empty_patches",
+        format!("patches with no faces were dropped: {}", empty.join(", ")),
+    ));
+    let mut remap = vec![u32::MAX; patch_names.len()];
+    let mut names = Vec::new();
+    for (i, n) in patch_names.iter().enumerate() {
+        if used[i] {
+            remap[i] = names.len() as u32;
+            names.push(n.clone());
+        }
+    }
+    for p in face_patch.iter_mut() {
+        *p = remap[*p as usize];
+    }
+    *patch_names = names;
+}
+
+/// Bounding box of a set of points (`[+inf; 3], [-inf; 3]` when empty).
+pub fn bbox_of(points: impl Iterator<Item = [f64; 3]>) -> ([f64; 3], [f64; 3]) {
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for p in points {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    (lo, hi)
+}
+
+fn check_finite(positions: &[[f64; 3]]) -> Result<(), MeshError> {
+    for (i, p) in positions.iter().enumerate() {
+        for (k, &x) in p.iter().enumerate() {
+            if !x.is_finite() {
+                return Err(MeshError::NonFinite {
+                    vertex: i,
+                    axis: ['x', 'y', 'z'][k],
+                    value: x,
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+fn check_faces(positions: &[[f64; 3]], triangles: &[[u32; 3]]) -> Result<(), MeshError> {
+    for (f, t) in triangles.iter().enumerate() {
+        if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] {
+            return Err(MeshError::DegenerateFace {
+                face: f,
+                vertices: *t,
+                reason: "repeated vertex",
+            });
+        }
+        let [a, b, c] = [
+            positions[t[0] as usize],
+            positions[t[1] as usize],
+            positions[t[2] as usize],
+        ];
+        let e0 = sub(b, a);
+        let e1 = sub(c, b);
+        let e2 = sub(a, c);
+        let cr = cross(e0, sub(c, a));
+        let area2 = dot(cr, cr).sqrt();
+        let lmax2 = dot(e0, e0).max(dot(e1, e1)).max(dot(e2, e2));
+        if area2 <= DEGENERATE_REL_AREA * lmax2 || !area2.is_finite() {
+            return Err(MeshError::DegenerateFace {
+                face: f,
+                vertices: *t,
+                reason: "zero area",
+            });
+        }
+    }
+    Ok(())
+}
+
+#[inline]
+pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+#[inline]
+pub(crate) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+#[inline]
+pub(crate) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
