@@ -7,7 +7,8 @@
 //!
 //! Patches: each distinct (`o`, `g`) pair that has faces is one patch, named `g`, `o`, or
 //! `o/g` when both are given; faces before any `o`/`g` go to patch `default`. Polygons are
-//! triangulated by ear clipping in their best-fit plane, so non-convex polygons come out right.
+//! triangulated by ear clipping in their best-fit plane, so non-convex polygons come out right;
+//! a convex quad is split along its shorter diagonal.
 
 use super::ReadError;
 use crate::mesh::{RawMesh, UvLayer, Warning};
@@ -285,6 +286,22 @@ pub fn triangulate_polygon(pts: &[[f64; 3]], out: &mut Vec<[usize; 3]>, s: &mut 
     let cross2 = |a: [f64; 2], b: [f64; 2], c: [f64; 2]| {
         (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
     };
+    // A convex quad is split along its shorter diagonal (in 3D): for a non-planar quad that
+    // is the flatter, more usual choice, and it does not depend on where the face starts.
+    if n == 4 && (0..4).all(|k| cross2(p[(k + 3) % 4], p[k], p[(k + 1) % 4]) > 0.0) {
+        let d = |a: usize, b: usize| {
+            let v = crate::mesh::sub(pts[a], pts[b]);
+            crate::mesh::dot(v, v)
+        };
+        if d(1, 3) < d(0, 2) {
+            out.push([0, 1, 3]);
+            out.push([1, 2, 3]);
+        } else {
+            out.push([0, 1, 2]);
+            out.push([0, 2, 3]);
+        }
+        return;
+    }
     while s.idx.len() > 3 {
         let m = s.idx.len();
         let mut best: Option<(usize, f64)> = None;

@@ -587,7 +587,7 @@ fn count_fans(outs: &[u32], twin: &[u32]) -> usize {
     fans
 }
 
-/// Orient every component consistently with its lowest-numbered face. Returns the flipped
+/// Orient every component consistently, flipping the minority of its faces. Returns the flipped
 /// faces, or the edge where a non-orientable component fails.
 fn orient(tris: &mut [[u32; 3]], groups: &[(u32, u32, u32)]) -> Result<Vec<u32>, MeshError> {
     let nf = tris.len();
@@ -641,9 +641,35 @@ fn orient(tris: &mut [[u32; 3]], groups: &[(u32, u32, u32)]) -> Result<Vec<u32>,
             }
         }
     }
+    // Each component keeps the orientation most of its faces already have: flip the minority.
+    let mut comp = vec![NONE; nf];
+    let mut comp_flips: Vec<(usize, usize)> = Vec::new();
+    for f0 in 0..nf {
+        if comp[f0] != NONE {
+            continue;
+        }
+        let id = comp_flips.len() as u32;
+        let (mut total, mut flips) = (0usize, 0usize);
+        comp[f0] = id;
+        stack.push(f0);
+        while let Some(f) = stack.pop() {
+            total += 1;
+            flips += usize::from(flip[f] == Some(true));
+            for k in 0..3 {
+                let g = adj[3 * f + k].0;
+                if g != NONE && comp[g as usize] == NONE {
+                    comp[g as usize] = id;
+                    stack.push(g as usize);
+                }
+            }
+        }
+        comp_flips.push((total, flips));
+    }
     let mut flipped = Vec::new();
-    for (f, fl) in flip.iter().enumerate() {
-        if *fl == Some(true) {
+    for f in 0..nf {
+        let (total, flips) = comp_flips[comp[f] as usize];
+        let invert = 2 * flips > total;
+        if (flip[f] == Some(true)) != invert {
             tris[f].swap(1, 2);
             flipped.push(f as u32);
         }

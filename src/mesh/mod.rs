@@ -17,7 +17,7 @@
 //! | edge with more than two faces | fatal, names the edge and its faces |
 //! | vertex with more than one fan (bow-tie) | fatal, names the vertex |
 //! | duplicate face (same three vertices) | fatal, names both faces |
-//! | inconsistent orientation, orientable component | repaired: faces flipped to agree with the lowest-numbered face of their component, with a warning |
+//! | inconsistent orientation, orientable component | repaired: the minority of the component's faces is flipped, with a warning naming them |
 //! | non-orientable component | fatal, names an edge where orientation cannot agree |
 //! | unreferenced vertex | kept (indices stay the file's) but ignored by every measure, with a warning |
 

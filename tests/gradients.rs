@@ -1,0 +1,173 @@
+//! The analytic gradients of θ (Prop. 1 and 2 of wang-flattenable-laplacian-meshes) against
+//! central finite differences and against the paper's cotangent formulas, on random meshes.
+
+use flatmesh::geometry::{angle_sum_at, theta_gradient};
+use flatmesh::mesh::{Mesh, RawMesh};
+use proptest::prelude::*;
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+fn norm(a: [f64; 3]) -> f64 {
+    dot(a, a).sqrt()
+}
+fn angle(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> f64 {
+    let (u, v) = (sub(b, a), sub(c, a));
+    (dot(u, v) / (norm(u) * norm(v))).clamp(-1.0, 1.0).acos()
+}
+
+/// A closed fan around vertex 0 with `k` neighbours at random angles, radii and heights.
+fn fan(k: usize, params: &[(f64, f64, f64)]) -> RawMesh {
+    let mut positions = vec![[0.0, 0.0, params[0].2 * 0.5]];
+    let mut acc = 0.0;
+    let total: f64 = params.iter().take(k).map(|p| p.0).sum();
+    for p in params.iter().take(k) {
+        acc += p.0 / total * std::f64::consts::TAU;
+        positions.push([p.1 * acc.cos(), p.1 * acc.sin(), p.2]);
+    }
+    let triangles = (0..k as u32).map(|i| [0, 1 + i, 1 + (i + 1) % k as u32]).collect();
+    RawMesh {
+        positions,
+        triangles,
+        ..RawMesh::default()
+    }
+}
+
+/// Central differences of θ(q) with respect to the position of vertex `p`.
+fn fd_gradient(mesh: &Mesh, q: u32, p: u32) -> [f64; 3] {
+    let r = mesh.conn().ring_of(q)[0];
+    let h = 1e-6 * norm(sub(mesh.position(r), mesh.position(q)));
+    let mut g = [0.0; 3];
+    for (k, gk) in g.iter_mut().enumerate() {
+        let mut plus = mesh.positions().to_vec();
+        let mut minus = plus.clone();
+        plus[p as usize][k] += h;
+        minus[p as usize][k] -= h;
+        let mp = mesh.with_positions(plus).unwrap();
+        let mm = mesh.with_positions(minus).unwrap();
+        *gk = (angle_sum_at(&mp, q) - angle_sum_at(&mm, q)) / (2.0 * h);
+    }
+    g
+}
+
+/// Eq. 13 written out independently: for neighbour p of q, the angles at q beside edge qp.
+fn paper_eq13(mesh: &Mesh, q: u32, p: u32) -> [f64; 3] {
+    let (vq, vp) = (mesh.position(q), mesh.position(p));
+    let lpq = norm(sub(vp, vq));
+    let mut g = [0.0; 3];
+    for t in mesh.triangles() {
+        if !(t.contains(&q) && t.contains(&p)) {
+            continue;
+        }
+        let a = *t.iter().find(|&&x| x != q && x != p).unwrap();
+        let va = mesh.position(a);
+        let xi = angle(vq, vp, va);
+        let laq = norm(sub(va, vq));
+        for i in 0..3 {
+            g[i] += xi.cos() / xi.sin() / (lpq * lpq) * (vp[i] - vq[i])
+                - (va[i] - vq[i]) / (lpq * laq * xi.sin());
+        }
+    }
+    g
+}
+
+/// Eq. 12 with the |pq|² of Appendix B: Σ_q (cot ξ_{q,p} + cot γ_{q,p}) / |pq|² (v_q − v_p),
+/// the angles taken at the neighbour q.
+fn paper_eq12(mesh: &Mesh, p: u32) -> [f64; 3] {
+    let vp = mesh.position(p);
+    let mut g = [0.0; 3];
+    for t in mesh.triangles() {
+        let Some(k) = t.iter().position(|&x| x == p) else {
+            continue;
+        };
+        for (q, a) in [(t[(k + 1) % 3], t[(k + 2) % 3]), (t[(k + 2) % 3], t[(k + 1) % 3])] {
+            let (vq, va) = (mesh.position(q), mesh.position(a));
+            let ang = angle(vq, vp, va);
+            let l2 = dot(sub(vq, vp), sub(vq, vp));
+            for i in 0..3 {
+                g[i] += ang.cos() / ang.sin() / l2 * (vq[i] - vp[i]);
+            }
+        }
+    }
+    g
+}
+
+fn close(a: [f64; 3], b: [f64; 3], rel: f64) -> bool {
+    let scale = norm(a).max(norm(b)).max(1.0);
+    norm(sub(a, b)) <= rel * scale
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(300))]
+
+    #[test]
+    fn gradients_match_finite_differences_and_paper(
+        k in 3usize..10,
+        params in proptest::collection::vec((0.3f64..1.0, 0.5f64..2.0, -0.8f64..0.8), 10),
+    ) {
+        let raw = fan(k, &params);
+        let Ok((mesh, _)) = Mesh::new(raw) else { return Ok(()) };
+        prop_assume!(mesh.conn().is_interior(0));
+        let mut grads = Vec::new();
+        theta_gradient(&mesh, 0, &mut grads);
+        prop_assert_eq!(grads.len(), k + 1);
+        for &(p, g) in &grads {
+            let fd = fd_gradient(&mesh, 0, p);
+            prop_assert!(close(g, fd, 1e-6), "vertex {}: analytic {:?} vs FD {:?}", p, g, fd);
+            let paper = if p == 0 { paper_eq12(&mesh, 0) } else { paper_eq13(&mesh, 0, p) };
+            prop_assert!(close(g, paper, 1e-9), "vertex {}: analytic {:?} vs paper {:?}", p, g, paper);
+        }
+        // Translating the whole fan leaves θ unchanged: the gradients sum to zero.
+        let mut s = [0.0; 3];
+        for (_, g) in &grads { for i in 0..3 { s[i] += g[i]; } }
+        prop_assert!(norm(s) <= 1e-9 * grads.iter().map(|g| norm(g.1)).fold(1.0, f64::max));
+    }
+}
+
+/// Every interior vertex of a noisy grid, including obtuse and very acute corners.
+#[test]
+fn gradients_on_noisy_grid() {
+    let n = 8usize;
+    let mut state = 0x9e3779b97f4a7c15u64;
+    let mut rnd = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+    };
+    let mut positions = Vec::new();
+    for j in 0..n {
+        for i in 0..n {
+            positions.push([i as f64 + 0.6 * rnd(), j as f64 + 0.6 * rnd(), 0.8 * rnd()]);
+        }
+    }
+    let mut triangles = Vec::new();
+    for j in 0..n - 1 {
+        for i in 0..n - 1 {
+            let a = (j * n + i) as u32;
+            let (b, c, d) = (a + 1, a + n as u32, a + n as u32 + 1);
+            triangles.push([a, b, d]);
+            triangles.push([a, d, c]);
+        }
+    }
+    let (mesh, _) = Mesh::new(RawMesh {
+        positions,
+        triangles,
+        ..RawMesh::default()
+    })
+    .unwrap();
+    let mut grads = Vec::new();
+    let mut checked = 0;
+    for q in mesh.conn().interior_vertices() {
+        theta_gradient(&mesh, q, &mut grads);
+        for &(p, g) in &grads {
+            let fd = fd_gradient(&mesh, q, p);
+            assert!(close(g, fd, 1e-6), "θ({q}) wrt {p}: {g:?} vs {fd:?}");
+            checked += 1;
+        }
+    }
+    assert_eq!(checked, 36 * 7, "6x6 interior vertices, each with 6 neighbours plus itself");
+}
