@@ -5,6 +5,7 @@
 //! [`io`] the readers and writers, [`fixtures`] procedural meshes with known answers.
 #![warn(missing_docs)]
 
+pub mod algorithms;
 pub mod fixtures;
 pub mod geometry;
 pub mod io;

@@ -1,10 +1,12 @@
 //! The `flatmesh` command line: the engine without a server.
 
 use clap::{Parser, Subcommand};
+use flatmesh::algorithms::{self, Control, Progress};
 use flatmesh::io;
 use flatmesh::report::Report;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::time::{Duration, Instant};
 
 /// Measure and optimise the flattenability of triangle meshes.
 #[derive(Parser)]
@@ -30,6 +32,27 @@ enum Command {
         #[arg(long, value_name = "OUT.glb")]
         glb: Option<PathBuf>,
     },
+    /// Run a job locally, without a server, and write its results into DIR.
+    ///
+    /// DIR receives report.json (the flattenability report of the output mesh plus the job's
+    /// own figures), mesh.glb and mesh.obj. Progress goes to stderr. Exit status: 0 on
+    /// success, 2 for invalid input or parameters, 1 on other failures.
+    Run {
+        /// Job kind.
+        #[arg(value_parser = clap::builder::PossibleValuesParser::new(algorithms::KINDS))]
+        kind: String,
+        /// The input mesh.
+        mesh: PathBuf,
+        /// Output directory (created if missing).
+        #[arg(long, value_name = "DIR")]
+        out: PathBuf,
+        /// A parameter, KEY=VALUE; VALUE is read as JSON when it parses, else as a string.
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+        /// A reference body mesh, for kinds that use one.
+        #[arg(long, value_name = "MESH")]
+        reference: Option<PathBuf>,
+    },
     /// Write the procedural test meshes (known answers) as OBJ files into DIR.
     Fixtures {
         /// Output directory (created if missing).
@@ -41,7 +64,14 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
         Command::Report { mesh, json, glb } => report(&mesh, json, glb.as_deref()),
-        Command::Fixtures { dir } => match write_all_fixtures(&dir) {
+        Command::Run {
+            kind,
+            mesh,
+            out,
+            set,
+            reference,
+        } => run(&kind, &mesh, &out, &set, reference.as_deref()),
+        Command::Fixtures { dir } => match flatmesh::fixtures::write_all(&dir) {
             Ok(paths) => {
                 for p in paths {
                     println!("{}", p.display());
@@ -56,22 +86,29 @@ fn main() -> ExitCode {
     }
 }
 
-fn report(path: &std::path::Path, json: bool, glb: Option<&std::path::Path>) -> ExitCode {
-    let (mesh, warnings) = match io::load_path(path) {
-        Ok(m) => m,
-        Err(io::ReadError::Io(e)) => {
+/// Load a mesh or explain (exit 2 for invalid content, 1 when unreadable).
+fn load(path: &Path) -> Result<(flatmesh::mesh::Mesh, Vec<flatmesh::mesh::Warning>), ExitCode> {
+    io::load_path(path).map_err(|e| match e {
+        io::ReadError::Io(e) => {
             eprintln!("flatmesh: cannot read {e}");
-            return ExitCode::FAILURE;
+            ExitCode::FAILURE
         }
-        Err(e) => {
+        e => {
             eprintln!("flatmesh: invalid mesh {}: {e}", path.display());
-            return ExitCode::from(2);
+            ExitCode::from(2)
         }
+    })
+}
+
+fn report(path: &Path, json: bool, glb: Option<&Path>) -> ExitCode {
+    let (mesh, warnings) = match load(path) {
+        Ok(m) => m,
+        Err(code) => return code,
     };
     let report = Report::compute(&mesh, &warnings);
     if let Some(out) = glb {
         let varpi: Vec<f64> = report.per_vertex.iter().map(|v| v.flattenability).collect();
-        let bytes = write_glb_tmp(&mesh, Some(&varpi));
+        let bytes = io::gltf::write_glb(&mesh, Some(&varpi));
         if let Err(e) = std::fs::write(out, bytes) {
             eprintln!("flatmesh: cannot write {}: {e}", out.display());
             return ExitCode::FAILURE;
@@ -92,6 +129,100 @@ fn report(path: &std::path::Path, json: bool, glb: Option<&std::path::Path>) -> 
     ExitCode::SUCCESS
 }
 
-// TEMPORARY until helpers land their APIs.
-fn write_all_fixtures(_d: &std::path::Path) -> std::io::Result<Vec<PathBuf>> { Ok(vec![]) }
-fn write_glb_tmp(_m: &flatmesh::mesh::Mesh, _v: Option<&[f64]>) -> Vec<u8> { vec![] }
+/// `--set KEY=VALUE` pairs as a JSON object.
+fn parse_sets(sets: &[String]) -> Result<serde_json::Map<String, serde_json::Value>, String> {
+    let mut params = serde_json::Map::new();
+    for s in sets {
+        let (k, v) = s
+            .split_once('=')
+            .ok_or_else(|| format!("--set {s:?}: expected KEY=VALUE"))?;
+        let k = k.trim();
+        if k.is_empty() {
+            return Err(format!("--set {s:?}: empty key"));
+        }
+        let value = serde_json::from_str(v).unwrap_or_else(|_| serde_json::Value::String(v.into()));
+        params.insert(k.to_string(), value);
+    }
+    Ok(params)
+}
+
+/// Progress on stderr, at most a few lines a second.
+struct StderrProgress {
+    last: std::sync::Mutex<Option<Instant>>,
+}
+
+impl Control for StderrProgress {
+    fn progress(&self, p: &Progress) {
+        let mut last = self.last.lock().unwrap_or_else(|e| e.into_inner());
+        if last.is_some_and(|t| t.elapsed() < Duration::from_millis(200)) {
+            return;
+        }
+        *last = Some(Instant::now());
+        let mut line = format!("{} {}", p.stage, p.iteration);
+        if let Some(w) = p.max_flattenability {
+            line += &format!("  ϖ_max {w:.3e}");
+        }
+        if let Some(s) = p.step_norm {
+            line += &format!("  |δ| {s:.3e}");
+        }
+        eprintln!("{line}");
+    }
+    fn cancelled(&self) -> bool {
+        false
+    }
+}
+
+fn run(kind: &str, mesh: &Path, out: &Path, sets: &[String], reference: Option<&Path>) -> ExitCode {
+    let params = match parse_sets(sets) {
+        Ok(p) => p,
+        Err(e) => {
+            eprintln!("flatmesh: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    if let Err(e) = algorithms::validate(kind, &params) {
+        eprintln!("flatmesh: {e}");
+        return ExitCode::from(2);
+    }
+    let (mesh, warnings) = match load(mesh) {
+        Ok(m) => m,
+        Err(code) => return code,
+    };
+    let reference = match reference.map(load).transpose() {
+        Ok(r) => r.map(|r| r.0),
+        Err(code) => return code,
+    };
+    let input = algorithms::Input {
+        mesh,
+        reference,
+    };
+    let control = StderrProgress {
+        last: std::sync::Mutex::new(None),
+    };
+    let start = Instant::now();
+    let outcome = match algorithms::run(kind, &input, &params, &control) {
+        Ok(o) => o,
+        Err(e @ (algorithms::AlgoError::InvalidParam { .. } | algorithms::AlgoError::Input(_))) => {
+            eprintln!("flatmesh: {e}");
+            return ExitCode::from(2);
+        }
+        Err(e) => {
+            eprintln!("flatmesh: {kind} failed: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    let seconds = start.elapsed().as_secs_f64();
+    if let Err(e) = std::fs::create_dir_all(out) {
+        eprintln!("flatmesh: cannot create {}: {e}", out.display());
+        return ExitCode::FAILURE;
+    }
+    for a in io::artifacts::render(&input.mesh, &outcome, &warnings, seconds) {
+        let path = out.join(a.name);
+        if let Err(e) = std::fs::write(&path, &a.bytes) {
+            eprintln!("flatmesh: cannot write {}: {e}", path.display());
+            return ExitCode::FAILURE;
+        }
+        println!("{}", path.display());
+    }
+    ExitCode::SUCCESS
+}

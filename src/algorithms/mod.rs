@@ -1,0 +1,136 @@
+//! Algorithms: one module per capability, each a pure function
+//! `run(&Mesh, &Params, &dyn Control) -> Result<Outcome, AlgoError>` that knows nothing of HTTP,
+//! files or threads (../shared/DESIGN.md). This module holds what they share: progress and
+//! cancellation ([`Control`]), typed parameters parsed from JSON, and the dispatcher by job
+//! kind used by the CLI (`flatmesh run`) and the service alike.
+
+pub mod report_job;
+
+use crate::mesh::Mesh;
+use serde::de::DeserializeOwned;
+use serde::Serialize;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// One progress report; algorithms send one per iteration.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct Progress {
+    /// What the algorithm is doing (`newton`, `refine`, `level 2`, `lpfb`, …).
+    pub stage: String,
+    /// Iteration within the stage.
+    pub iteration: usize,
+    /// Current ϖ_max (radians), where the algorithm tracks it.
+    pub max_flattenability: Option<f64>,
+    /// Norm of the last step, where there is one.
+    pub step_norm: Option<f64>,
+}
+
+/// How an algorithm reports progress and learns that it should stop. Implementations must be
+/// cheap: algorithms call them once per iteration.
+pub trait Control: Sync {
+    /// Record progress.
+    fn progress(&self, p: &Progress);
+    /// Whether the caller asked to stop; algorithms check once per iteration and then return
+    /// [`AlgoError::Cancelled`].
+    fn cancelled(&self) -> bool;
+}
+
+/// A [`Control`] that ignores progress and can be cancelled through a flag.
+#[derive(Debug, Default)]
+pub struct Silent {
+    /// Set to request cancellation.
+    pub cancel: AtomicBool,
+}
+
+impl Control for Silent {
+    fn progress(&self, _: &Progress) {}
+    fn cancelled(&self) -> bool {
+        self.cancel.load(Ordering::Relaxed)
+    }
+}
+
+/// Why an algorithm did not produce a result.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum AlgoError {
+    /// The caller cancelled.
+    #[error("cancelled")]
+    Cancelled,
+    /// A parameter is unknown or has a bad value; `key` names it.
+    #[error("parameter `{key}`: {message}")]
+    InvalidParam {
+        /// The parameter's name (empty when the whole object is malformed).
+        key: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// The job kind does not exist.
+    #[error("unknown job kind `{0}` (available: {kinds})", kinds = KINDS.join(", "))]
+    UnknownKind(String),
+    /// The input cannot be processed, with the element at fault.
+    #[error("{0}")]
+    Input(String),
+}
+
+/// The job kinds implemented, in the order the CLI lists them.
+pub const KINDS: &[&str] = &["report"];
+
+/// What a run produced: an output mesh (for optimisers), and a JSON object of
+/// algorithm-specific figures (iterations, converged, history, …) merged into `report.json`.
+#[derive(Debug, Clone)]
+pub struct Outcome {
+    /// The optimised mesh, when the algorithm changes the mesh.
+    pub mesh: Option<Mesh>,
+    /// Extra figures, a JSON object.
+    pub summary: serde_json::Map<String, serde_json::Value>,
+}
+
+/// Everything a job needs.
+#[derive(Debug, Clone)]
+pub struct Input {
+    /// The mesh to work on.
+    pub mesh: Mesh,
+    /// A reference body (for `perturb`), when given.
+    pub reference: Option<Mesh>,
+}
+
+/// Parse typed parameters from a JSON object, naming the offending key on failure. Parameter
+/// structs use `#[serde(deny_unknown_fields)]` so that unknown keys are refused.
+pub fn parse_params<P: DeserializeOwned>(
+    params: &serde_json::Map<String, serde_json::Value>,
+) -> Result<P, AlgoError> {
+    serde_json::from_value(serde_json::Value::Object(params.clone())).map_err(|e| {
+        let msg = e.to_string();
+        // serde_json says "unknown field `foo`, expected …" or "invalid type: … for key `x`"
+        // depending on the error; pull the key out when it names one.
+        let key = msg
+            .split('`')
+            .nth(1)
+            .filter(|_| msg.starts_with("unknown field") || msg.starts_with("missing field"))
+            .unwrap_or("")
+            .to_string();
+        AlgoError::InvalidParam { key, message: msg }
+    })
+}
+
+/// Check a job's parameters without running it (the service refuses bad jobs up front).
+pub fn validate(
+    kind: &str,
+    params: &serde_json::Map<String, serde_json::Value>,
+) -> Result<(), AlgoError> {
+    match kind {
+        "report" => parse_params::<report_job::Params>(params).map(|_| ()),
+        other => Err(AlgoError::UnknownKind(other.to_string())),
+    }
+}
+
+/// Run a job of `kind` on `input`.
+pub fn run(
+    kind: &str,
+    input: &Input,
+    params: &serde_json::Map<String, serde_json::Value>,
+    control: &dyn Control,
+) -> Result<Outcome, AlgoError> {
+    match kind {
+        "report" => report_job::run(&input.mesh, &parse_params(params)?, control),
+        other => Err(AlgoError::UnknownKind(other.to_string())),
+    }
+}
