@@ -192,10 +192,7 @@ fn run(kind: &str, mesh: &Path, out: &Path, sets: &[String], reference: Option<&
         Ok(r) => r.map(|r| r.0),
         Err(code) => return code,
     };
-    let input = algorithms::Input {
-        mesh,
-        reference,
-    };
+    let input = algorithms::Input { mesh, reference };
     let control = StderrProgress {
         last: std::sync::Mutex::new(None),
     };

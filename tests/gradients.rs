@@ -28,7 +28,9 @@ fn fan(k: usize, params: &[(f64, f64, f64)]) -> RawMesh {
         acc += p.0 / total * std::f64::consts::TAU;
         positions.push([p.1 * acc.cos(), p.1 * acc.sin(), p.2]);
     }
-    let triangles = (0..k as u32).map(|i| [0, 1 + i, 1 + (i + 1) % k as u32]).collect();
+    let triangles = (0..k as u32)
+        .map(|i| [0, 1 + i, 1 + (i + 1) % k as u32])
+        .collect();
     RawMesh {
         positions,
         triangles,
@@ -83,7 +85,10 @@ fn paper_eq12(mesh: &Mesh, p: u32) -> [f64; 3] {
         let Some(k) = t.iter().position(|&x| x == p) else {
             continue;
         };
-        for (q, a) in [(t[(k + 1) % 3], t[(k + 2) % 3]), (t[(k + 2) % 3], t[(k + 1) % 3])] {
+        for (q, a) in [
+            (t[(k + 1) % 3], t[(k + 2) % 3]),
+            (t[(k + 2) % 3], t[(k + 1) % 3]),
+        ] {
             let (vq, va) = (mesh.position(q), mesh.position(a));
             let ang = angle(vq, vp, va);
             let l2 = dot(sub(vq, vp), sub(vq, vp));
@@ -169,5 +174,9 @@ fn gradients_on_noisy_grid() {
             checked += 1;
         }
     }
-    assert_eq!(checked, 36 * 7, "6x6 interior vertices, each with 6 neighbours plus itself");
+    assert_eq!(
+        checked,
+        36 * 7,
+        "6x6 interior vertices, each with 6 neighbours plus itself"
+    );
 }

@@ -38,7 +38,8 @@ fn all_index_forms_and_negative_indices() {
 
 #[test]
 fn comments_crlf_blank_lines_and_continuations() {
-    let text = "# header\r\n\r\nv 0 0 0 # origin\r\nv 1 0 0\r\n   \r\nv 0 1 \\\r\n 0\r\nf 1 2 3\r\n";
+    let text =
+        "# header\r\n\r\nv 0 0 0 # origin\r\nv 1 0 0\r\n   \r\nv 0 1 \\\r\n 0\r\nf 1 2 3\r\n";
     let m = load(text);
     assert_eq!(m.num_vertices(), 3);
     assert_eq!(m.position(2), [0.0, 1.0, 0.0]);
@@ -67,7 +68,14 @@ fn vertex_order_is_the_files() {
 #[test]
 fn non_convex_polygons_triangulate_correctly() {
     // L shape, counter-clockwise in the plane z = x + y (tilted, so the projection matters).
-    let pts2 = [[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [1.0, 1.0], [1.0, 2.0], [0.0, 2.0]];
+    let pts2 = [
+        [0.0, 0.0],
+        [2.0, 0.0],
+        [2.0, 1.0],
+        [1.0, 1.0],
+        [1.0, 2.0],
+        [0.0, 2.0],
+    ];
     let mut text = String::new();
     for p in pts2 {
         text += &format!("v {} {} {}\n", p[0], p[1], p[0] + p[1]);

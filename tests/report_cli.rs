@@ -93,7 +93,11 @@ fn seams_split_patches_but_keep_the_surface_whole() {
     assert_eq!(c.shared_vertices(), &[0, 1, 3]);
     for p in c.patches() {
         assert_eq!(p.boundary_loops.len(), 1);
-        assert_eq!(p.boundary_loops[0].len(), 4, "two outer edges and two seam edges");
+        assert_eq!(
+            p.boundary_loops[0].len(),
+            4,
+            "two outer edges and two seam edges"
+        );
         assert_eq!(p.euler_characteristic(), 1);
     }
     let r = Report::compute(&m, &[]);
@@ -174,11 +178,20 @@ fn cli_report_json_and_exit_codes() {
     ] {
         assert!(v.get(key).is_some(), "missing {key}");
     }
-    for key in ["name", "faces", "vertices", "interior_vertices", "boundary_loops"] {
+    for key in [
+        "name",
+        "faces",
+        "vertices",
+        "interior_vertices",
+        "boundary_loops",
+    ] {
         assert!(v["patches"][0].get(key).is_some(), "patch missing {key}");
     }
     for key in ["index", "interior", "flattenability", "gaussian_curvature"] {
-        assert!(v["per_vertex"][0].get(key).is_some(), "per_vertex missing {key}");
+        assert!(
+            v["per_vertex"][0].get(key).is_some(),
+            "per_vertex missing {key}"
+        );
     }
     let expected = TAU - 4.0 * (0.25f64 / 1.25).acos();
     assert!((v["max_flattenability"].as_f64().unwrap() - expected).abs() < 1e-12);
@@ -196,7 +209,10 @@ fn cli_report_json_and_exit_codes() {
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8(out.stderr).unwrap();
     assert_eq!(err.lines().count(), 1, "{err}");
-    assert!(err.contains("face 0 (vertices 0 1 2) is degenerate: zero area"), "{err}");
+    assert!(
+        err.contains("face 0 (vertices 0 1 2) is degenerate: zero area"),
+        "{err}"
+    );
     assert!(out.stdout.is_empty());
 
     // A missing file is not invalid input: exit 1.

@@ -30,7 +30,11 @@ fn shared_meshes() -> Option<Vec<PathBuf>> {
         }
     }
     out.sort();
-    assert!(out.len() >= 15, "expected the 15 shared meshes, found {}", out.len());
+    assert!(
+        out.len() >= 15,
+        "expected the 15 shared meshes, found {}",
+        out.len()
+    );
     Some(out)
 }
 
@@ -152,7 +156,10 @@ fn every_shared_mesh_reports_or_is_refused_precisely() {
                 assert_eq!(w, 0.0);
             }
         }
-        assert!(max_diff <= 1e-9, "{name}: angle sums differ by {max_diff:e} rad");
+        assert!(
+            max_diff <= 1e-9,
+            "{name}: angle sums differ by {max_diff:e} rad"
+        );
         let reported = json["max_flattenability"].as_f64().unwrap();
         assert!((reported - max_varpi).abs() <= 1e-9, "{name}");
         let d = json["D"].as_f64().unwrap();
@@ -182,7 +189,11 @@ fn shared_mesh_topology_matches_the_manifest() {
         }
         let (mesh, _) = flatmesh::io::load_path(&dir.join(file)).unwrap();
         let conn = mesh.conn();
-        assert_eq!(mesh.num_vertices().to_string(), f[col("vertices")], "{file}");
+        assert_eq!(
+            mesh.num_vertices().to_string(),
+            f[col("vertices")],
+            "{file}"
+        );
         assert_eq!(mesh.num_faces().to_string(), f[col("triangles")], "{file}");
         assert_eq!(
             conn.boundary_loops().len().to_string(),
@@ -195,7 +206,11 @@ fn shared_mesh_topology_matches_the_manifest() {
             "{file}"
         );
         let boundary_edges: usize = conn.boundary_loops().iter().map(|l| l.len()).sum();
-        assert_eq!(boundary_edges.to_string(), f[col("boundary_edges")], "{file}");
+        assert_eq!(
+            boundary_edges.to_string(),
+            f[col("boundary_edges")],
+            "{file}"
+        );
         checked += 1;
     }
     assert_eq!(checked, 14);

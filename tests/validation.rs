@@ -41,7 +41,10 @@ fn index_out_of_range() {
     );
     let e = obj(&format!("{SQUARE}f 1 2 3\nf 1 3 9\n")).unwrap_err();
     assert!(matches!(e, ReadError::Syntax { line: 6, .. }), "{e}");
-    assert!(e.to_string().contains("vertex index 9 is out of range"), "{e}");
+    assert!(
+        e.to_string().contains("vertex index 9 is out of range"),
+        "{e}"
+    );
     let e = obj(&format!("{SQUARE}f 1 2 -7\n")).unwrap_err();
     assert!(e.to_string().contains("line 5"), "{e}");
     let e = obj(&format!("{SQUARE}f 0 1 2\n")).unwrap_err();
@@ -71,9 +74,19 @@ fn non_finite_coordinate() {
 
 #[test]
 fn degenerate_faces() {
-    let e = Mesh::new(raw(vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], vec![[0, 1, 1]]))
-        .unwrap_err();
-    assert!(matches!(e, MeshError::DegenerateFace { face: 0, reason: "repeated vertex", .. }));
+    let e = Mesh::new(raw(
+        vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+        vec![[0, 1, 1]],
+    ))
+    .unwrap_err();
+    assert!(matches!(
+        e,
+        MeshError::DegenerateFace {
+            face: 0,
+            reason: "repeated vertex",
+            ..
+        }
+    ));
     // Collinear points: zero area.
     let e = obj("v 0 0 0\nv 1 0 0\nv 2 0 0\nv 0 1 0\nf 1 2 4\nf 1 2 3\n").unwrap_err();
     assert_eq!(
@@ -84,7 +97,9 @@ fn degenerate_faces() {
             reason: "zero area"
         })
     );
-    assert!(e.to_string().contains("face 1 (vertices 0 1 2) is degenerate"));
+    assert!(e
+        .to_string()
+        .contains("face 1 (vertices 0 1 2) is degenerate"));
     let e = obj(&format!("{SQUARE}f 1 2\n")).unwrap_err();
     assert!(e.to_string().contains("face with 2 vertices"), "{e}");
 }
@@ -93,7 +108,13 @@ fn degenerate_faces() {
 fn non_manifold_edge() {
     // Three triangles on edge 0-1.
     let e = Mesh::new(raw(
-        vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.5, 1.0, 0.0], [0.5, -1.0, 0.0], [0.5, 0.0, 1.0]],
+        vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.5, 1.0, 0.0],
+            [0.5, -1.0, 0.0],
+            [0.5, 0.0, 1.0],
+        ],
         vec![[0, 1, 2], [1, 0, 3], [0, 1, 4]],
     ))
     .unwrap_err();
@@ -115,7 +136,13 @@ fn non_manifold_edge() {
 fn non_manifold_vertex() {
     // Two triangles touching only at vertex 0 (a bow-tie).
     let e = Mesh::new(raw(
-        vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [-1.0, -1.0, 0.0]],
+        vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [-1.0, 0.0, 0.0],
+            [-1.0, -1.0, 0.0],
+        ],
         vec![[0, 1, 2], [0, 3, 4]],
     ))
     .unwrap_err();
@@ -141,8 +168,16 @@ fn inconsistent_orientation_is_repaired() {
     let (mesh, warnings) = obj(&format!("{SQUARE}v 2 0 0\nf 1 2 3\nf 1 4 3\nf 2 5 3\n")).unwrap();
     assert_eq!(warnings.len(), 1);
     assert_eq!(warnings[0].code, "orientation_repaired");
-    assert!(warnings[0].message.starts_with("1 faces were flipped"), "{}", warnings[0].message);
-    assert!(warnings[0].message.contains("faces 1)"), "{}", warnings[0].message);
+    assert!(
+        warnings[0].message.starts_with("1 faces were flipped"),
+        "{}",
+        warnings[0].message
+    );
+    assert!(
+        warnings[0].message.contains("faces 1)"),
+        "{}",
+        warnings[0].message
+    );
     assert_eq!(mesh.triangles()[0], [0, 1, 2]);
     assert_eq!(mesh.triangles()[1], [0, 2, 3]);
     assert_eq!(mesh.triangles()[2], [1, 4, 2]);
@@ -167,7 +202,11 @@ fn non_orientable_surface_is_refused() {
     let mut triangles = Vec::new();
     for i in 0..n as u32 {
         let (a, b) = (2 * i, 2 * i + 1);
-        let (c, d) = if i + 1 == n as u32 { (1, 0) } else { (2 * i + 2, 2 * i + 3) };
+        let (c, d) = if i + 1 == n as u32 {
+            (1, 0)
+        } else {
+            (2 * i + 2, 2 * i + 3)
+        };
         triangles.push([a, c, d]);
         triangles.push([a, d, b]);
     }
@@ -183,7 +222,11 @@ fn unreferenced_vertices_are_kept_and_ignored() {
     assert_eq!(mesh.triangles()[0], [1, 2, 3]);
     assert_eq!(mesh.conn().kind(0), VertexKind::Unreferenced);
     assert_eq!(warnings[0].code, "unreferenced_vertices");
-    assert!(warnings[0].message.contains("vertices 0, 4"), "{}", warnings[0].message);
+    assert!(
+        warnings[0].message.contains("vertices 0, 4"),
+        "{}",
+        warnings[0].message
+    );
     let report = Report::compute(&mesh, &warnings);
     assert_eq!(report.per_vertex[0].kind, "unreferenced");
     assert_eq!(report.per_vertex[0].flattenability, 0.0);
@@ -201,10 +244,17 @@ fn bad_patch_ids_and_lengths() {
     r.patch_names = vec!["a".into()];
     assert!(matches!(
         Mesh::new(r.clone()).unwrap_err(),
-        MeshError::PatchOutOfRange { face: 0, patch: 3, patches: 1 }
+        MeshError::PatchOutOfRange {
+            face: 0,
+            patch: 3,
+            patches: 1
+        }
     ));
     r.face_patch = vec![0, 0];
-    assert!(matches!(Mesh::new(r).unwrap_err(), MeshError::Inconsistent { .. }));
+    assert!(matches!(
+        Mesh::new(r).unwrap_err(),
+        MeshError::Inconsistent { .. }
+    ));
 }
 
 #[test]
@@ -214,7 +264,11 @@ fn with_positions_rejects_nan_and_degeneracy() {
     p[2][0] = f64::NAN;
     assert!(matches!(
         mesh.with_positions(p).unwrap_err(),
-        MeshError::NonFinite { vertex: 2, axis: 'x', .. }
+        MeshError::NonFinite {
+            vertex: 2,
+            axis: 'x',
+            ..
+        }
     ));
     let mut p = mesh.positions().to_vec();
     p[2] = p[0];
@@ -236,7 +290,9 @@ fn unknown_format_and_garbage() {
     for len in [0usize, 1, 7, 64, 1000] {
         let bytes: Vec<u8> = (0..len)
             .map(|_| {
-                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
                 (state >> 56) as u8
             })
             .collect();

@@ -39,7 +39,10 @@ fn resolve(tok: &str, count: usize, line: usize, what: &str) -> Result<u32, Read
     } else if i < 0 {
         count as i64 + i
     } else {
-        return Err(syntax(line, format!("{what} index 0 is invalid (OBJ counts from 1)")));
+        return Err(syntax(
+            line,
+            format!("{what} index 0 is invalid (OBJ counts from 1)"),
+        ));
     };
     if idx < 0 || idx >= count as i64 {
         return Err(syntax(
@@ -162,14 +165,13 @@ pub fn read(bytes: &[u8]) -> Result<(RawMesh, Vec<Warning>), ReadError> {
                 if poly.len() == 3 {
                     tri_buf.push([0, 1, 2]);
                 } else {
-                    let pts: Vec<[f64; 3]> = poly
-                        .iter()
-                        .map(|p| raw.positions[p.0 as usize])
-                        .collect();
+                    let pts: Vec<[f64; 3]> =
+                        poly.iter().map(|p| raw.positions[p.0 as usize]).collect();
                     triangulate_polygon(&pts, &mut tri_buf, &mut scratch);
                 }
                 for t in &tri_buf {
-                    raw.triangles.push([poly[t[0]].0, poly[t[1]].0, poly[t[2]].0]);
+                    raw.triangles
+                        .push([poly[t[0]].0, poly[t[1]].0, poly[t[2]].0]);
                     raw.face_patch.push(patch);
                     if has_uv {
                         uv_tris.push([

@@ -27,13 +27,16 @@ pub fn read(bytes: &[u8]) -> Result<(RawMesh, Vec<Warning>), ReadError> {
     let mut head_toks = header.split_ascii_whitespace();
     let magic = head_toks.next().unwrap_or("");
     let with_normals = magic.contains('N');
-    if !magic.ends_with("OFF") || magic.contains("ST") || magic.contains('4') || magic.contains("n") {
+    if !magic.ends_with("OFF") || magic.contains("ST") || magic.contains('4') || magic.contains("n")
+    {
         return Err(syntax(hline, format!("unsupported OFF header {magic:?}")));
     }
     // Counts may follow the header on the same line.
     let rest: Vec<&str> = head_toks.collect();
     let (cline, counts): (usize, Vec<&str>) = if rest.is_empty() {
-        let (l, c) = lines.next().ok_or_else(|| syntax(hline, "missing counts"))?;
+        let (l, c) = lines
+            .next()
+            .ok_or_else(|| syntax(hline, "missing counts"))?;
         (l, c.split_ascii_whitespace().collect())
     } else {
         (hline, rest)
@@ -61,9 +64,12 @@ pub fn read(bytes: &[u8]) -> Result<(RawMesh, Vec<Warning>), ReadError> {
         let mut it = t.split_ascii_whitespace();
         let mut p = [0.0; 3];
         for (k, c) in p.iter_mut().enumerate() {
-            let tok = it
-                .next()
-                .ok_or_else(|| syntax(l, format!("vertex has no {} coordinate", ["x", "y", "z"][k])))?;
+            let tok = it.next().ok_or_else(|| {
+                syntax(
+                    l,
+                    format!("vertex has no {} coordinate", ["x", "y", "z"][k]),
+                )
+            })?;
             *c = tok
                 .parse()
                 .map_err(|_| syntax(l, format!("coordinate {tok:?} is not a number")))?;
@@ -86,7 +92,10 @@ pub fn read(bytes: &[u8]) -> Result<(RawMesh, Vec<Warning>), ReadError> {
             .parse()
             .map_err(|_| syntax(l, "face does not start with its vertex count"))?;
         if n < 3 {
-            return Err(syntax(l, format!("face with {n} vertices (at least 3 needed)")));
+            return Err(syntax(
+                l,
+                format!("face with {n} vertices (at least 3 needed)"),
+            ));
         }
         poly.clear();
         for _ in 0..n {
@@ -97,7 +106,10 @@ pub fn read(bytes: &[u8]) -> Result<(RawMesh, Vec<Warning>), ReadError> {
                 .parse()
                 .map_err(|_| syntax(l, format!("vertex index {tok:?} is not an integer")))?;
             if i >= nv {
-                return Err(syntax(l, format!("vertex index {i} out of range ({nv} vertices)")));
+                return Err(syntax(
+                    l,
+                    format!("vertex index {i} out of range ({nv} vertices)"),
+                ));
             }
             poly.push(i as u32);
         }

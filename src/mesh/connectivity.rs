@@ -220,7 +220,9 @@ impl Connectivity {
             edges.push([groups[i].0, groups[i].1]);
             let c0 = groups[i].2;
             he_edge[c0 as usize] = e;
-            if i + 1 < groups.len() && groups[i + 1].0 == groups[i].0 && groups[i + 1].1 == groups[i].1
+            if i + 1 < groups.len()
+                && groups[i + 1].0 == groups[i].0
+                && groups[i + 1].1 == groups[i].1
             {
                 let c1 = groups[i + 1].2;
                 twin[c0 as usize] = c1;

@@ -391,7 +391,11 @@ impl Mesh {
 }
 
 /// Drop patches that have no faces (harmless, but worth a warning) so every patch has faces.
-fn compact_patches(face_patch: &mut [u32], patch_names: &mut Vec<String>, warnings: &mut Vec<Warning>) {
+fn compact_patches(
+    face_patch: &mut [u32],
+    patch_names: &mut Vec<String>,
+    warnings: &mut Vec<Warning>,
+) {
     let mut used = vec![false; patch_names.len()];
     for &p in face_patch.iter() {
         used[p as usize] = true;
