@@ -15,6 +15,10 @@ use crate::mesh::{RawMesh, UvLayer, Warning};
 use std::collections::HashMap;
 use std::fmt::Write;
 
+/// Ear clipping is quadratic to cubic in a polygon's size; faces this large are not surface
+/// meshes but outlines, and would let one line of input stall the reader.
+pub const MAX_POLYGON: usize = 1024;
+
 fn syntax(line: usize, message: impl Into<String>) -> ReadError {
     ReadError::Syntax {
         format: "OBJ",
@@ -140,6 +144,15 @@ pub fn read(bytes: &[u8]) -> Result<(RawMesh, Vec<Warning>), ReadError> {
                         return Err(syntax(line_no, format!("malformed face vertex {tok:?}")));
                     }
                     poly.push((v, vt));
+                }
+                if poly.len() > MAX_POLYGON {
+                    return Err(syntax(
+                        line_no,
+                        format!(
+                            "face with {} vertices (at most {MAX_POLYGON} supported)",
+                            poly.len()
+                        ),
+                    ));
                 }
                 if poly.len() < 3 {
                     return Err(syntax(

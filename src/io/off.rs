@@ -91,6 +91,15 @@ pub fn read(bytes: &[u8]) -> Result<(RawMesh, Vec<Warning>), ReadError> {
             .unwrap_or("")
             .parse()
             .map_err(|_| syntax(l, "face does not start with its vertex count"))?;
+        if n > super::obj::MAX_POLYGON {
+            return Err(syntax(
+                l,
+                format!(
+                    "face with {n} vertices (at most {} supported)",
+                    super::obj::MAX_POLYGON
+                ),
+            ));
+        }
         if n < 3 {
             return Err(syntax(
                 l,
