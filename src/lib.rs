@@ -10,4 +10,5 @@ pub mod fixtures;
 pub mod geometry;
 pub mod io;
 pub mod mesh;
+pub mod pattern;
 pub mod report;

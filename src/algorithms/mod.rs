@@ -75,10 +75,12 @@ pub const KINDS: &[&str] = &["report"];
 
 /// What a run produced: an output mesh (for optimisers), and a JSON object of
 /// algorithm-specific figures (iterations, converged, history, …) merged into `report.json`.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct Outcome {
     /// The optimised mesh, when the algorithm changes the mesh.
     pub mesh: Option<Mesh>,
+    /// Flat patterns, when the algorithm flattens.
+    pub patterns: Option<crate::pattern::Patterns>,
     /// Extra figures, a JSON object.
     pub summary: serde_json::Map<String, serde_json::Value>,
 }

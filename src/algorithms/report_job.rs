@@ -19,8 +19,5 @@ pub fn run(_mesh: &Mesh, _params: &Params, control: &dyn Control) -> Result<Outc
         stage: "report".into(),
         ..Progress::default()
     });
-    Ok(Outcome {
-        mesh: None,
-        summary: serde_json::Map::new(),
-    })
+    Ok(Outcome::default())
 }
