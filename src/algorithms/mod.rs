@@ -4,6 +4,7 @@
 //! cancellation ([`Control`]), typed parameters parsed from JSON, and the dispatcher by job
 //! kind used by the CLI (`flatmesh run`) and the service alike.
 
+pub mod flatten;
 pub mod report_job;
 
 use crate::mesh::Mesh;
@@ -71,7 +72,7 @@ pub enum AlgoError {
 }
 
 /// The job kinds implemented, in the order the CLI lists them.
-pub const KINDS: &[&str] = &["report"];
+pub const KINDS: &[&str] = &["report", "flatten"];
 
 /// What a run produced: an output mesh (for optimisers), and a JSON object of
 /// algorithm-specific figures (iterations, converged, history, …) merged into `report.json`.
@@ -120,6 +121,7 @@ pub fn validate(
 ) -> Result<(), AlgoError> {
     match kind {
         "report" => parse_params::<report_job::Params>(params).map(|_| ()),
+        "flatten" => parse_params::<flatten::Params>(params)?.check(),
         other => Err(AlgoError::UnknownKind(other.to_string())),
     }
 }
@@ -133,6 +135,7 @@ pub fn run(
 ) -> Result<Outcome, AlgoError> {
     match kind {
         "report" => report_job::run(&input.mesh, &parse_params(params)?, control),
+        "flatten" => flatten::run(&input.mesh, &parse_params(params)?, control),
         other => Err(AlgoError::UnknownKind(other.to_string())),
     }
 }

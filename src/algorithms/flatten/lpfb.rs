@@ -1,0 +1,316 @@
+//! Length-preserved free boundary (LPFB), Sec. 3.1–3.3 of wang-lpfb: the boundary of a disk
+//! is laid out edge by edge with its 3D lengths (Eq. 6–7), and only the inner turning angles
+//! θ_i are unknown. They minimise Σ ½(θ_i − a_i)² subject to the closed-path theorem and
+//! closure (Eq. 9), plus the coincidence of cut-path copies for patches with holes (Eq. 10).
+//!
+//! The SQP step of Eq. 12 is solved through the reduced system ΛΛᵀ δλ = ΛB_θ − B_λ (Eq. 13)
+//! and δθ = B_θ − Λᵀδλ (Eq. 14), densely: LU with full pivoting when ΛΛᵀ has full rank, an SVD
+//! pseudo-inverse otherwise. Start θ_i = a_i, λ = 1; stop when ‖∇J‖ < tolerance.
+//!
+//! Choices where the paper is silent, stated here:
+//! - Lengths are divided by their mean inside the solver, so the tolerance on ‖∇J‖ means the
+//!   same for a piece in metres or in millimetres (the optimal θ does not depend on scale).
+//! - Along a cut path, the coincidence of every copy pair (Eq. 10 taken literally) is redundant
+//!   once the two copies of each cut edge have equal length, as they do by construction:
+//!   ΛΛᵀ loses one rank per path vertex at the solution. We impose the same feasible set with
+//!   independent rows: for each path, Eq. 10's coincidence of the two copies of its first
+//!   vertex, and for each cut edge that its two copies are antiparallel,
+//!   φ_b − φ_a = π + 2πk (linear in θ; k is fixed from θ = a). Equal lengths and antiparallel
+//!   copies carry the coincidence along the whole path.
+//! - Once ‖∇J‖ is below the tolerance, a few Gauss–Newton steps on the constraints alone
+//!   (δθ = −Λᵀ(ΛΛᵀ)⁺g, quadratically convergent) close the loop to rounding error, so that the
+//!   closing edge keeps its length to ~1e-14 relative like every other edge.
+
+use super::super::{AlgoError, Control, Progress};
+use faer::Mat;
+use std::f64::consts::PI;
+
+/// The LPFB problem on one boundary loop (the cut loop for a patch with holes).
+#[derive(Debug, Clone)]
+pub struct Problem {
+    /// l_k: 3D length of loop edge k (from entry k to entry k+1).
+    pub lengths: Vec<f64>,
+    /// a_i: surface inner angle at entry i.
+    pub angles: Vec<f64>,
+    /// Eq. 10 coincidence pairs (α, β), α < β ≤ n: Σ_{k=α}^{β−1} l_k (cos φ_k, sin φ_k) = 0.
+    pub pairs: Vec<(usize, usize)>,
+    /// Cut-edge copies (a, b), a < b: their directions differ by π (mod 2π).
+    pub antiparallel: Vec<(usize, usize)>,
+}
+
+/// The solved boundary.
+#[derive(Debug, Clone)]
+pub struct Solution {
+    /// Inner turning angles θ_i.
+    pub theta: Vec<f64>,
+    /// Planar position of each loop entry (Eq. 6), entry 0 at the origin.
+    pub positions: Vec<[f64; 2]>,
+    /// SQP iterations taken (Eq. 12).
+    pub iterations: usize,
+    /// Whether ‖∇J‖ fell below the tolerance.
+    pub converged: bool,
+    /// Final ‖∇J‖ (lengths normalised by their mean).
+    pub grad_norm: f64,
+    /// Iterations where ΛΛᵀ was rank deficient and the SVD pseudo-inverse was used.
+    pub svd_steps: usize,
+    /// Largest constraint residual after the closing steps (normalised lengths, radians).
+    pub constraint_residual: f64,
+}
+
+struct Work {
+    n: usize,
+    r: usize,
+    lam_mat: Vec<f64>, // r × n, row-major
+    g: Vec<f64>,
+    phi: Vec<f64>,
+    ex: Vec<f64>,
+    ey: Vec<f64>,
+}
+
+impl Work {
+    /// Evaluate φ (Eq. 7), the constraints g and their Jacobian Λ (Appendix, Statement 3).
+    fn eval(&mut self, p: &Problem, l: &[f64], theta: &[f64], ap_target: &[f64]) {
+        let n = self.n;
+        let mut s = 0.0;
+        for k in 0..n {
+            s += theta[k];
+            // φ_k (0-based) = (k+1)π − Σ_{b ≤ k} θ_b
+            self.phi[k] = (k + 1) as f64 * PI - s;
+            self.ex[k] = l[k] * self.phi[k].cos();
+            self.ey[k] = l[k] * self.phi[k].sin();
+        }
+        // row 0: closed-path theorem, (n − 2)π − Σθ = 0
+        self.g[0] = (n as f64 - 2.0) * PI - s;
+        self.lam_mat[..n].iter_mut().for_each(|x| *x = -1.0);
+        let mut row = 1;
+        let ranges = std::iter::once((0usize, n)).chain(p.pairs.iter().copied());
+        for (a, b) in ranges {
+            let (rx, ry) = (row, row + 1);
+            let (mut sx, mut sy) = (0.0, 0.0);
+            // suffix sums over k ∈ [a, b), k ≥ i: ∂(l cos φ_k)/∂θ_i = l sin φ_k for i ≤ k
+            for i in (0..n).rev() {
+                if i >= a && i < b {
+                    sx += self.ex[i];
+                    sy += self.ey[i];
+                }
+                self.lam_mat[rx * n + i] = sy;
+                self.lam_mat[ry * n + i] = -sx;
+            }
+            self.g[rx] = sx;
+            self.g[ry] = sy;
+            row += 2;
+        }
+        for (j, &(a, b)) in p.antiparallel.iter().enumerate() {
+            self.g[row] = self.phi[b] - self.phi[a] - ap_target[j];
+            let r = &mut self.lam_mat[row * n..(row + 1) * n];
+            for (i, x) in r.iter_mut().enumerate() {
+                *x = if i > a && i <= b { -1.0 } else { 0.0 };
+            }
+            row += 1;
+        }
+        debug_assert_eq!(row, self.r);
+    }
+
+    /// ΛΛᵀ as a dense matrix.
+    fn gram(&self) -> Mat<f64> {
+        let (n, r) = (self.n, self.r);
+        Mat::from_fn(r, r, |i, j| {
+            let (a, b) = (&self.lam_mat[i * n..(i + 1) * n], &self.lam_mat[j * n..(j + 1) * n]);
+            a.iter().zip(b).map(|(x, y)| x * y).sum()
+        })
+    }
+}
+
+/// Solve M x = rhs densely: LU with full pivoting when M has full rank, else the SVD
+/// pseudo-inverse (Eq. 13). Returns whether the SVD was used.
+fn dense_solve(m: &Mat<f64>, rhs: &[f64]) -> Result<(Vec<f64>, bool), String> {
+    let r = m.nrows();
+    let lu = m.full_piv_lu();
+    let u = lu.U();
+    let mut dmax: f64 = 0.0;
+    let mut dmin = f64::INFINITY;
+    for i in 0..r {
+        let d = u[(i, i)].abs();
+        dmax = dmax.max(d);
+        dmin = dmin.min(d);
+    }
+    if dmax > 0.0 && dmin > 1e-12 * dmax && dmin.is_finite() {
+        use faer::linalg::solvers::Solve;
+        let mut x = Mat::from_fn(r, 1, |i, _| rhs[i]);
+        lu.solve_in_place(x.as_mut());
+        let v: Vec<f64> = (0..r).map(|i| x[(i, 0)]).collect();
+        if v.iter().all(|x| x.is_finite()) {
+            return Ok((v, false));
+        }
+    }
+    let svd = m.svd().map_err(|e| format!("SVD failed: {e:?}"))?;
+    let (uu, s, vv) = (svd.U(), svd.S(), svd.V());
+    let s = s.column_vector();
+    let smax = (0..r).map(|i| s[i].abs()).fold(0.0, f64::max);
+    let mut x = vec![0.0; r];
+    for k in 0..r {
+        let sk = s[k];
+        if sk.abs() <= 1e-12 * smax || sk == 0.0 {
+            continue;
+        }
+        let c: f64 = (0..r).map(|i| uu[(i, k)] * rhs[i]).sum::<f64>() / sk;
+        for (i, xi) in x.iter_mut().enumerate() {
+            *xi += vv[(i, k)] * c;
+        }
+    }
+    Ok((x, true))
+}
+
+/// Solve the LPFB problem (Eq. 9/10 by Eq. 11–14) and lay the boundary out (Eq. 6–7).
+pub fn solve(
+    p: &Problem,
+    max_iterations: usize,
+    tolerance: f64,
+    control: &dyn Control,
+    stage: &str,
+) -> Result<Solution, AlgoError> {
+    let n = p.lengths.len();
+    if n < 3 || p.angles.len() != n {
+        return Err(AlgoError::Input(format!(
+            "{stage}: a boundary loop needs at least 3 edges (has {n})"
+        )));
+    }
+    let mean = p.lengths.iter().sum::<f64>() / n as f64;
+    if !(mean > 0.0 && mean.is_finite()) {
+        return Err(AlgoError::Input(format!(
+            "{stage}: boundary edge lengths are degenerate"
+        )));
+    }
+    let l: Vec<f64> = p.lengths.iter().map(|x| x / mean).collect();
+    let r = 3 + 2 * p.pairs.len() + p.antiparallel.len();
+    let mut w = Work {
+        n,
+        r,
+        lam_mat: vec![0.0; r * n],
+        g: vec![0.0; r],
+        phi: vec![0.0; n],
+        ex: vec![0.0; n],
+        ey: vec![0.0; n],
+    };
+    let mut theta = p.angles.clone();
+    // k of each antiparallel pair from θ = a, where the 3D surface fixes it (Sec. 3.2).
+    let mut ap_target = vec![0.0; p.antiparallel.len()];
+    {
+        let mut phi = vec![0.0; n];
+        let mut s = 0.0;
+        for k in 0..n {
+            s += theta[k];
+            phi[k] = (k + 1) as f64 * PI - s;
+        }
+        for (j, &(a, b)) in p.antiparallel.iter().enumerate() {
+            let d = phi[b] - phi[a] - PI;
+            ap_target[j] = PI + (d / (2.0 * PI)).round() * 2.0 * PI;
+        }
+    }
+    let mut lambda = vec![1.0; r];
+    let mut b_theta = vec![0.0; n];
+    let mut iterations = 0;
+    let mut converged = false;
+    let mut grad_norm;
+    let mut svd_steps = 0;
+    let mut rhs = vec![0.0; r];
+    loop {
+        if control.cancelled() {
+            return Err(AlgoError::Cancelled);
+        }
+        w.eval(p, &l, &theta, &ap_target);
+        // B_θ = −∂J/∂θ = −(θ − a) − Λᵀλ ; B_λ = −g  (Appendix, Statements 1–2)
+        for i in 0..n {
+            let mut s = -(theta[i] - p.angles[i]);
+            for j in 0..r {
+                s -= w.lam_mat[j * n + i] * lambda[j];
+            }
+            b_theta[i] = s;
+        }
+        grad_norm = (b_theta.iter().map(|x| x * x).sum::<f64>()
+            + w.g.iter().map(|x| x * x).sum::<f64>())
+        .sqrt();
+        if !grad_norm.is_finite() {
+            return Err(AlgoError::Input(format!(
+                "{stage}: LPFB diverged (‖∇J‖ not finite at iteration {iterations})"
+            )));
+        }
+        control.progress(&Progress {
+            stage: stage.to_string(),
+            iteration: iterations,
+            max_flattenability: None,
+            step_norm: Some(grad_norm),
+        });
+        if grad_norm < tolerance {
+            converged = true;
+            break;
+        }
+        if iterations >= max_iterations {
+            break;
+        }
+        // Eq. 13: ΛΛᵀ δλ = Λ B_θ − B_λ
+        let m = w.gram();
+        for j in 0..r {
+            let row = &w.lam_mat[j * n..(j + 1) * n];
+            rhs[j] = row.iter().zip(&b_theta).map(|(a, b)| a * b).sum::<f64>() + w.g[j];
+        }
+        let (dl, used_svd) =
+            dense_solve(&m, &rhs).map_err(|e| AlgoError::Input(format!("{stage}: {e}")))?;
+        svd_steps += used_svd as usize;
+        // Eq. 14: δθ = B_θ − Λᵀ δλ
+        for i in 0..n {
+            let mut s = b_theta[i];
+            for j in 0..r {
+                s -= w.lam_mat[j * n + i] * dl[j];
+            }
+            theta[i] += s;
+        }
+        for j in 0..r {
+            lambda[j] += dl[j];
+        }
+        iterations += 1;
+    }
+    // Close the loop to rounding error: Gauss–Newton on g alone.
+    let mut resid = f64::INFINITY;
+    for _ in 0..20 {
+        w.eval(p, &l, &theta, &ap_target);
+        let nr = w.g.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+        if !(nr < resid) {
+            break;
+        }
+        resid = nr;
+        if nr <= 1e-15 * n as f64 {
+            break;
+        }
+        let m = w.gram();
+        let (dl, used_svd) =
+            dense_solve(&m, &w.g).map_err(|e| AlgoError::Input(format!("{stage}: {e}")))?;
+        svd_steps += used_svd as usize;
+        for i in 0..n {
+            let mut s = 0.0;
+            for j in 0..r {
+                s -= w.lam_mat[j * n + i] * dl[j];
+            }
+            theta[i] += s;
+        }
+    }
+    w.eval(p, &l, &theta, &ap_target);
+    let constraint_residual = w.g.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+    // Eq. 6: positions with the true (unnormalised) lengths
+    let mut positions = Vec::with_capacity(n);
+    let (mut x, mut y) = (0.0, 0.0);
+    for k in 0..n {
+        positions.push([x, y]);
+        x += p.lengths[k] * w.phi[k].cos();
+        y += p.lengths[k] * w.phi[k].sin();
+    }
+    Ok(Solution {
+        theta,
+        positions,
+        iterations,
+        converged,
+        grad_norm,
+        svd_steps,
+        constraint_residual,
+    })
+}

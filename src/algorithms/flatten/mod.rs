@@ -1,0 +1,536 @@
+//! The `flatten` job: every patch becomes a flat sewing-pattern piece whose boundary keeps its
+//! 3D edge lengths (wang-lpfb-quasi-developable-segmentation, Sec. 3 and 4.1).
+//!
+//! Per piece (a connected component of a patch; rayon over pieces):
+//! 1. topology ([`cut`]): wedge-split vertices, boundary loops, outer loop = longest in 3D;
+//!    for several loops the virtual cut of Sec. 3.2 (Dijkstra paths inner → outer);
+//! 2. LPFB ([`lpfb`]): Eq. 9/10 solved by Eq. 11–14, boundary by Eq. 6–7, mapped back from the
+//!    cut loop to the loops of the piece (Sec. 3.2 step 6);
+//! 3. interior ([`param`]): intrinsic parameterization with the LPFB fixed, Eq. 15–18;
+//! 4. measures ([`measures`]): A(Ω), L²/L∞ stretch, Π_L, Π_θ, flips, S(Ω), σ1/σ2 stretch.
+//!
+//! `method = "lscm"` replaces 2–3 by a free-boundary LSCM (baseline, as in Table 1).
+//! Seams: every chain of edges shared by two pieces, with its 3D length and its length on both.
+//!
+//! Units: the JSON pattern is in the mesh's own units. The mesh's unit is the parameter
+//! `input_unit` (default `m`, the unit of glTF and of most garment exports); the SVG and DXF
+//! drawings are scaled to `unit` (default `mm`).
+
+pub mod cut;
+pub mod lpfb;
+pub mod measures;
+pub mod param;
+
+use super::{AlgoError, Control, Outcome};
+use crate::mesh::{Mesh, NONE};
+use crate::pattern::{Patterns, Piece, Seam};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
+use std::time::Instant;
+
+/// Flattening method.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    /// Length-preserved free boundary + intrinsic parameterization (the paper).
+    #[default]
+    Lpfb,
+    /// Least-squares conformal map, free boundary (baseline).
+    Lscm,
+}
+
+/// A length unit for the input mesh and the drawings.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Unit {
+    /// Millimetre.
+    #[default]
+    Mm,
+    /// Centimetre.
+    Cm,
+    /// Metre.
+    M,
+    /// Inch.
+    In,
+}
+
+impl Unit {
+    /// The unit's name as written in files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Unit::Mm => "mm",
+            Unit::Cm => "cm",
+            Unit::M => "m",
+            Unit::In => "in",
+        }
+    }
+}
+
+fn default_input_unit() -> Unit {
+    Unit::M
+}
+fn default_max_iterations() -> usize {
+    200
+}
+fn default_tolerance() -> f64 {
+    1e-5
+}
+
+/// Parameters of `flatten`; unknown keys are refused.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Params {
+    /// `lpfb` (default) or `lscm`.
+    #[serde(default)]
+    pub method: Method,
+    /// Unit of the SVG and DXF drawings (`mm` default, `cm`, `m`, `in`).
+    #[serde(default)]
+    pub unit: Unit,
+    /// Unit the mesh's coordinates are in (`m` default).
+    #[serde(default = "default_input_unit")]
+    pub input_unit: Unit,
+    /// Most SQP iterations of LPFB (Eq. 12) per piece.
+    #[serde(default = "default_max_iterations")]
+    pub max_iterations: usize,
+    /// Stop LPFB when ‖∇J‖ falls below this (the paper's 1e-5).
+    #[serde(default = "default_tolerance")]
+    pub tolerance: f64,
+    /// Draw the triangles in the SVG as well as the outlines.
+    #[serde(default)]
+    pub svg_triangles: bool,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Params {
+            method: Method::Lpfb,
+            unit: Unit::Mm,
+            input_unit: Unit::M,
+            max_iterations: default_max_iterations(),
+            tolerance: default_tolerance(),
+            svg_triangles: false,
+        }
+    }
+}
+
+impl Params {
+    /// Range checks.
+    pub fn check(&self) -> Result<(), AlgoError> {
+        if self.max_iterations == 0 || self.max_iterations > 100_000 {
+            return Err(AlgoError::InvalidParam {
+                key: "max_iterations".into(),
+                message: format!("must be in 1..=100000, got {}", self.max_iterations),
+            });
+        }
+        if !(self.tolerance > 0.0 && self.tolerance < 1.0) {
+            return Err(AlgoError::InvalidParam {
+                key: "tolerance".into(),
+                message: format!("must be in (0, 1), got {}", self.tolerance),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// What flattening one piece produced besides the piece.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct PieceInfo {
+    /// Piece name.
+    pub piece: String,
+    /// Faces.
+    pub faces: usize,
+    /// Boundary loops.
+    pub loops: usize,
+    /// Cut paths of the virtual cut.
+    pub cut_paths: usize,
+    /// LPFB SQP iterations.
+    pub iterations: usize,
+    /// Whether LPFB reached its tolerance (always true for LSCM).
+    pub converged: bool,
+    /// Final ‖∇J‖ of LPFB.
+    pub grad_norm: f64,
+    /// Iterations that needed the SVD pseudo-inverse.
+    pub svd_steps: usize,
+    /// Largest LPFB constraint residual after closing.
+    pub constraint_residual: f64,
+    /// Largest distance between copies of one vertex on the LPFB of the cut disk, relative to
+    /// the piece's diameter (0 without holes).
+    pub cut_coincidence: f64,
+    /// Seconds in LPFB, interior solve, measures.
+    pub seconds_lpfb: f64,
+    /// Seconds in the interior (or LSCM) solve.
+    pub seconds_param: f64,
+    /// Seconds in the measures.
+    pub seconds_measures: f64,
+}
+
+/// The pieces of a mesh: one per connected component of each patch.
+pub fn pieces_of(mesh: &Mesh) -> Result<Vec<cut::Piece3>, AlgoError> {
+    let nf = mesh.num_faces();
+    let fp = mesh.face_patch();
+    let mut parent: Vec<u32> = (0..nf as u32).collect();
+    fn find(p: &mut [u32], mut x: u32) -> u32 {
+        while p[x as usize] != x {
+            let q = p[x as usize];
+            p[x as usize] = p[q as usize];
+            x = q;
+        }
+        x
+    }
+    for ef in mesh.conn().edge_faces() {
+        if ef[1] != NONE && fp[ef[0] as usize] == fp[ef[1] as usize] {
+            let (a, b) = (find(&mut parent, ef[0]), find(&mut parent, ef[1]));
+            if a != b {
+                parent[a.max(b) as usize] = a.min(b);
+            }
+        }
+    }
+    let mut comps: Vec<Vec<Vec<u32>>> = vec![Vec::new(); mesh.num_patches()];
+    let mut comp_of_root: HashMap<u32, (usize, usize)> = HashMap::new();
+    for f in 0..nf as u32 {
+        let r = find(&mut parent, f);
+        let p = fp[f as usize] as usize;
+        let (pp, k) = *comp_of_root.entry(r).or_insert_with(|| {
+            comps[p].push(Vec::new());
+            (p, comps[p].len() - 1)
+        });
+        comps[pp][k].push(f);
+    }
+    let mut out = Vec::new();
+    for (p, cs) in comps.into_iter().enumerate() {
+        let many = cs.len() > 1;
+        for (k, faces) in cs.into_iter().enumerate() {
+            let base = &mesh.patch_names()[p];
+            let name = if many {
+                format!("{base}#{}", k + 1)
+            } else {
+                base.clone()
+            };
+            out.push(cut::Piece3::build(
+                name,
+                faces,
+                mesh.triangles(),
+                mesh.positions(),
+            )?);
+        }
+    }
+    Ok(out)
+}
+
+fn diameter(pos: &[[f64; 3]]) -> f64 {
+    let (lo, hi) = crate::mesh::bbox_of(pos.iter().copied());
+    cut::dist(lo, hi)
+}
+
+/// LPFB of a piece (Sec. 3): planar positions of its boundary vertices, with solver figures.
+pub fn lpfb_boundary(
+    p: &cut::Piece3,
+    params: &Params,
+    control: &dyn Control,
+    info: &mut PieceInfo,
+) -> Result<Vec<Option<[f64; 2]>>, AlgoError> {
+    let err = |e: String| AlgoError::Input(format!("piece `{}`: {e}", p.name));
+    let paths = cut::cut_paths(p)?;
+    let corner: Vec<[f64; 3]> = p
+        .tris
+        .iter()
+        .map(|t| {
+            let q = [p.pos[t[0] as usize], p.pos[t[1] as usize], p.pos[t[2] as usize]];
+            [
+                crate::geometry::corner_angle(q[0], q[1], q[2]),
+                crate::geometry::corner_angle(q[1], q[2], q[0]),
+                crate::geometry::corner_angle(q[2], q[0], q[1]),
+            ]
+        })
+        .collect();
+    let cl = cut::cut_loop(p, &paths, &corner).map_err(err)?;
+    let n = cl.vertex.len();
+    let lengths: Vec<f64> = (0..n)
+        .map(|k| cut::dist(p.pos[cl.vertex[k] as usize], p.pos[cl.vertex[(k + 1) % n] as usize]))
+        .collect();
+    let problem = lpfb::Problem {
+        lengths,
+        angles: cl.angle.clone(),
+        pairs: cl.seeds.clone(),
+        antiparallel: cl.cut_edges.clone(),
+    };
+    let sol = lpfb::solve(
+        &problem,
+        params.max_iterations,
+        params.tolerance,
+        control,
+        &format!("lpfb {}", p.name),
+    )?;
+    info.cut_paths = paths.len();
+    info.iterations = sol.iterations;
+    info.converged = sol.converged;
+    info.grad_norm = sol.grad_norm;
+    info.svd_steps = sol.svd_steps;
+    info.constraint_residual = sol.constraint_residual;
+    // Sec. 3.2 step 6: back to the piece. Boundary vertices take their (single) copy; cut
+    // path vertices have several copies, whose spread is the coincidence residual.
+    let mut fixed: Vec<Option<[f64; 2]>> = vec![None; p.pos.len()];
+    let mut first: Vec<Option<[f64; 2]>> = vec![None; p.pos.len()];
+    let mut spread: f64 = 0.0;
+    for (k, &v) in cl.vertex.iter().enumerate() {
+        let x = sol.positions[k];
+        match first[v as usize] {
+            None => first[v as usize] = Some(x),
+            Some(y) => spread = spread.max(((x[0] - y[0]).powi(2) + (x[1] - y[1]).powi(2)).sqrt()),
+        }
+    }
+    let diam = diameter(&p.pos);
+    info.cut_coincidence = if diam > 0.0 { spread / diam } else { spread };
+    for lp in &p.loops {
+        for &v in lp {
+            fixed[v as usize] = first[v as usize];
+        }
+    }
+    Ok(fixed)
+}
+
+/// Flatten one piece.
+pub fn flatten_piece(
+    p: &cut::Piece3,
+    params: &Params,
+    control: &dyn Control,
+) -> Result<(Piece, PieceInfo), AlgoError> {
+    let err = |e: String| AlgoError::Input(format!("piece `{}`: {e}", p.name));
+    let mut info = PieceInfo {
+        piece: p.name.clone(),
+        faces: p.tris.len(),
+        loops: p.loops.len(),
+        converged: true,
+        ..PieceInfo::default()
+    };
+    let t0 = Instant::now();
+    let uv = match params.method {
+        Method::Lpfb => {
+            let fixed = lpfb_boundary(p, params, control, &mut info)?;
+            info.seconds_lpfb = t0.elapsed().as_secs_f64();
+            let t1 = Instant::now();
+            let uv = param::harmonic_fill(&p.pos, &p.tris, &fixed).map_err(err)?;
+            info.seconds_param = t1.elapsed().as_secs_f64();
+            uv
+        }
+        Method::Lscm => {
+            if control.cancelled() {
+                return Err(AlgoError::Cancelled);
+            }
+            let uv = param::lscm(&p.pos, &p.tris, &p.loops).map_err(err)?;
+            info.seconds_param = t0.elapsed().as_secs_f64();
+            uv
+        }
+    };
+    let t2 = Instant::now();
+    let m = measures::compute(&p.pos, &uv, &p.tris, &p.loops, &p.vertex_ids);
+    info.seconds_measures = t2.elapsed().as_secs_f64();
+    let perimeter: f64 = p
+        .loops
+        .iter()
+        .map(|lp| {
+            (0..lp.len())
+                .map(|k| {
+                    let (a, b) = (uv[lp[k] as usize], uv[lp[(k + 1) % lp.len()] as usize]);
+                    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt()
+                })
+                .sum::<f64>()
+        })
+        .sum();
+    let mut mv = match serde_json::to_value(&m) {
+        Ok(serde_json::Value::Object(o)) => o,
+        _ => serde_json::Map::new(),
+    };
+    mv.insert("method".into(), serde_json::json!(params.method));
+    let piece = Piece {
+        patch: p.name.clone(),
+        vertex_ids: p.vertex_ids.clone(),
+        uv,
+        triangles: p.tris.clone(),
+        boundary_loops: p.loops.clone(),
+        area: m.area_2d,
+        perimeter,
+        measures: mv,
+        faces: p.faces.clone(),
+    };
+    Ok((piece, info))
+}
+
+/// Seams: chains of mesh edges whose two faces lie in different pieces, grouped by piece
+/// pair and split into connected chains. Lengths in 3D and on both pieces.
+pub fn seams(mesh: &Mesh, pieces: &[Piece]) -> Vec<Seam> {
+    // global face → (piece, local triangle)
+    let mut where_: Vec<(u32, u32)> = vec![(u32::MAX, 0); mesh.num_faces()];
+    for (pi, p) in pieces.iter().enumerate() {
+        for (t, &f) in p.faces.iter().enumerate() {
+            where_[f as usize] = (pi as u32, t as u32);
+        }
+    }
+    let conn = mesh.conn();
+    let mut groups: HashMap<(u32, u32), Vec<usize>> = HashMap::new();
+    for (e, ef) in conn.edge_faces().iter().enumerate() {
+        if ef[1] == NONE {
+            continue;
+        }
+        let (pa, pb) = (where_[ef[0] as usize].0, where_[ef[1] as usize].0);
+        if pa != pb && pa != u32::MAX && pb != u32::MAX {
+            groups.entry((pa.min(pb), pa.max(pb))).or_default().push(e);
+        }
+    }
+    let mut keys: Vec<(u32, u32)> = groups.keys().copied().collect();
+    keys.sort_unstable();
+    // 2D position of global vertex v in piece `pi` through face f
+    let uv_of = |pi: u32, f: u32, v: u32| -> Option<[f64; 2]> {
+        let p = &pieces[pi as usize];
+        let t = p.triangles[where_[f as usize].1 as usize];
+        t.iter()
+            .find(|&&w| p.vertex_ids[w as usize] == v)
+            .map(|&w| p.uv[w as usize])
+    };
+    let d2 = |a: [f64; 2], b: [f64; 2]| ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt();
+    let mut out = Vec::new();
+    for k in keys {
+        let edges = &groups[&k];
+        // chains: union edges sharing a vertex
+        let mut vid: HashMap<u32, usize> = HashMap::new();
+        let mut parent: Vec<usize> = Vec::new();
+        fn find(p: &mut [usize], mut x: usize) -> usize {
+            while p[x] != x {
+                p[x] = p[p[x]];
+                x = p[x];
+            }
+            x
+        }
+        for &e in edges {
+            for v in conn.edges()[e] {
+                let n = vid.len();
+                vid.entry(v).or_insert_with(|| {
+                    parent.push(n);
+                    n
+                });
+            }
+            let [a, b] = conn.edges()[e];
+            let (ra, rb) = (find(&mut parent, vid[&a]), find(&mut parent, vid[&b]));
+            parent[ra] = rb;
+        }
+        let mut chains: Vec<(usize, Vec<usize>)> = Vec::new();
+        for &e in edges {
+            let r = find(&mut parent, vid[&conn.edges()[e][0]]);
+            match chains.iter_mut().find(|c| c.0 == r) {
+                Some(c) => c.1.push(e),
+                None => chains.push((r, vec![e])),
+            }
+        }
+        for (_, ch) in chains {
+            let mut s = Seam {
+                patches: [
+                    pieces[k.0 as usize].patch.clone(),
+                    pieces[k.1 as usize].patch.clone(),
+                ],
+                pieces: [k.0 as usize, k.1 as usize],
+                ..Seam::default()
+            };
+            for &e in &ch {
+                let [a, b] = conn.edges()[e];
+                s.length_3d += cut::dist(mesh.position(a), mesh.position(b));
+                for &f in &conn.edge_faces()[e] {
+                    let pi = where_[f as usize].0;
+                    let side = if pi == k.0 { 0 } else { 1 };
+                    if let (Some(ua), Some(ub)) = (uv_of(pi, f, a), uv_of(pi, f, b)) {
+                        s.lengths[side] += d2(ua, ub);
+                        let p = &pieces[pi as usize];
+                        let t = p.triangles[where_[f as usize].1 as usize];
+                        let ia = t.iter().find(|&&w| p.vertex_ids[w as usize] == a);
+                        let ib = t.iter().find(|&&w| p.vertex_ids[w as usize] == b);
+                        if let (Some(&ia), Some(&ib)) = (ia, ib) {
+                            s.edges[side].push([ia, ib]);
+                        }
+                    }
+                }
+            }
+            out.push(s);
+        }
+    }
+    out
+}
+
+/// Run `flatten` on a mesh.
+pub fn run(mesh: &Mesh, params: &Params, control: &dyn Control) -> Result<Outcome, AlgoError> {
+    params.check()?;
+    let t0 = Instant::now();
+    let p3 = pieces_of(mesh)?;
+    let t_topo = t0.elapsed().as_secs_f64();
+    let results: Vec<Result<(Piece, PieceInfo), AlgoError>> = p3
+        .par_iter()
+        .map(|p| flatten_piece(p, params, control))
+        .collect();
+    let mut pieces = Vec::with_capacity(results.len());
+    let mut infos = Vec::with_capacity(results.len());
+    for r in results {
+        let (p, i) = r?;
+        pieces.push(p);
+        infos.push(i);
+    }
+    let t1 = Instant::now();
+    let seams = seams(mesh, &pieces);
+    let t_seams = t1.elapsed().as_secs_f64();
+    let mut summary = serde_json::Map::new();
+    summary.insert("method".into(), serde_json::json!(params.method));
+    summary.insert("input_unit".into(), serde_json::json!(params.input_unit));
+    summary.insert("unit".into(), serde_json::json!(params.unit));
+    let per_piece: Vec<serde_json::Value> = pieces
+        .iter()
+        .zip(&infos)
+        .map(|(p, i)| {
+            serde_json::json!({
+                "piece": p.patch,
+                "area": p.area,
+                "perimeter": p.perimeter,
+                "measures": p.measures,
+                "solver": i,
+            })
+        })
+        .collect();
+    summary.insert("pieces".into(), serde_json::Value::Array(per_piece));
+    summary.insert(
+        "seams".into(),
+        serde_json::to_value(
+            seams
+                .iter()
+                .map(|s| {
+                    serde_json::json!({"patches": s.patches, "length_3d": s.length_3d,
+                        "lengths": s.lengths})
+                })
+                .collect::<Vec<_>>(),
+        )
+        .unwrap_or_default(),
+    );
+    summary.insert(
+        "all_converged".into(),
+        serde_json::json!(infos.iter().all(|i| i.converged)),
+    );
+    summary.insert(
+        "timings".into(),
+        serde_json::json!({
+            "topology_s": t_topo,
+            "lpfb_s": infos.iter().map(|i| i.seconds_lpfb).sum::<f64>(),
+            "param_s": infos.iter().map(|i| i.seconds_param).sum::<f64>(),
+            "measures_s": infos.iter().map(|i| i.seconds_measures).sum::<f64>(),
+            "seams_s": t_seams,
+            "total_s": t0.elapsed().as_secs_f64(),
+        }),
+    );
+    let patterns = Patterns {
+        pieces,
+        seams,
+        input_unit: params.input_unit.name().to_string(),
+        unit: params.unit.name().to_string(),
+        svg_triangles: params.svg_triangles,
+    };
+    Ok(Outcome {
+        mesh: None,
+        patterns: Some(patterns),
+        summary,
+    })
+}
