@@ -66,8 +66,12 @@ fn grid(
 /// largest distance after the fit.
 fn rigid_fit_max_error(a: &[[f64; 2]], b: &[[f64; 2]]) -> f64 {
     let n = a.len() as f64;
-    let ca = a.iter().fold([0.0, 0.0], |s, p| [s[0] + p[0] / n, s[1] + p[1] / n]);
-    let cb = b.iter().fold([0.0, 0.0], |s, p| [s[0] + p[0] / n, s[1] + p[1] / n]);
+    let ca = a
+        .iter()
+        .fold([0.0, 0.0], |s, p| [s[0] + p[0] / n, s[1] + p[1] / n]);
+    let cb = b
+        .iter()
+        .fold([0.0, 0.0], |s, p| [s[0] + p[0] / n, s[1] + p[1] / n]);
     let (mut sc, mut ss) = (0.0, 0.0);
     for (p, q) in a.iter().zip(b) {
         let (p0, p1) = (p[0] - ca[0], p[1] - ca[1]);
@@ -121,8 +125,7 @@ fn boundary_rel_error(mesh: &Mesh, piece: &Piece) -> f64 {
                 mesh.position(piece.vertex_ids[i]),
                 mesh.position(piece.vertex_ids[j]),
             );
-            let l3 = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2))
-                .sqrt();
+            let l3 = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt();
             let (p, q) = (piece.uv[i], piece.uv[j]);
             let l2 = ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt();
             worst = worst.max((l2 - l3).abs() / l3);
@@ -156,7 +159,12 @@ fn loop_len_3d(mesh: &Mesh, piece: &Piece, lp: &[u32]) -> f64 {
 /// Cylinder strip of radius r over angle span `span`, height h; its true pattern puts vertex
 /// (i, j) at (i · 2r sin(Δt/2), z_j): the strips between generators are planar rectangles of
 /// chord width.
-fn cylinder(nu: usize, nv: usize, span: f64, keep: impl Fn(usize, usize) -> bool) -> (Mesh, Vec<[f64; 2]>) {
+fn cylinder(
+    nu: usize,
+    nv: usize,
+    span: f64,
+    keep: impl Fn(usize, usize) -> bool,
+) -> (Mesh, Vec<[f64; 2]>) {
     let (r, h) = (0.4, 0.9);
     let dt = span / (nu - 1) as f64;
     let z = |j: usize| h * (j as f64 / (nv - 1) as f64).powf(1.3); // uneven rows
@@ -227,10 +235,16 @@ fn check_exact(mesh: &Mesh, truth: &[[f64; 2]], label: &str) {
     assert_eq!(pat.pieces.len(), 1);
     let piece = &pat.pieces[0];
     let ours: Vec<[f64; 2]> = piece.uv.clone();
-    let want: Vec<[f64; 2]> = piece.vertex_ids.iter().map(|&v| truth[v as usize]).collect();
+    let want: Vec<[f64; 2]> = piece
+        .vertex_ids
+        .iter()
+        .map(|&v| truth[v as usize])
+        .collect();
     let err = rigid_fit_max_error(&ours, &want) / diameter2(&want);
     let bl = boundary_rel_error(mesh, piece);
-    println!("{label}: max vertex error / diameter = {err:.3e}, boundary length rel error = {bl:.3e}");
+    println!(
+        "{label}: max vertex error / diameter = {err:.3e}, boundary length rel error = {bl:.3e}"
+    );
     assert!(err <= 1e-6, "{label}: error {err}");
     assert!(bl <= 1e-9, "{label}: boundary {bl}");
     assert_eq!(piece.measures["flipped_triangles"], 0);
@@ -247,4 +261,18 @@ fn cylinder_strip_matches_its_unrolling() {
 fn cone_strip_matches_its_unrolling() {
     let (mesh, truth) = cone(36, 20);
     check_exact(&mesh, &truth, "cone");
+}
+
+#[test]
+fn debug_cyl_info() {
+    let (mesh, _truth) = cylinder(40, 25, 2.0, |_, _| true);
+    let o = flatten::run(&mesh, &Params::default(), &Silent::default()).unwrap();
+    println!(
+        "{}",
+        serde_json::to_string_pretty(&o.summary["pieces"][0]["solver"]).unwrap()
+    );
+    println!(
+        "{}",
+        serde_json::to_string_pretty(&o.summary["pieces"][0]["measures"]).unwrap()
+    );
 }

@@ -1,5 +1,5 @@
 //! Turn a job's outcome into the files a user downloads: `report.json`, `mesh.glb`,
-//! `mesh.obj`. The CLI writes them into a directory; the service stores them. Both go through
+//! `mesh.obj`, and for flattening `patterns.json`, `patterns.svg`, `patterns.dxf`. The CLI writes them into a directory; the service stores them. Both go through
 //! here so the two never disagree.
 
 use crate::algorithms::Outcome;
@@ -41,7 +41,7 @@ pub fn render(
     let report = Report::compute(mesh, warnings);
     let varpi: Vec<f64> = report.per_vertex.iter().map(|v| v.flattenability).collect();
     let value = job_report(&report, outcome, seconds);
-    vec![
+    let mut out = vec![
         Artifact {
             name: "report.json",
             media_type: "application/json",
@@ -57,5 +57,23 @@ pub fn render(
             media_type: "model/obj",
             bytes: super::obj::write(&mesh.to_raw()).into_bytes(),
         },
-    ]
+    ];
+    if let Some(p) = &outcome.patterns {
+        out.push(Artifact {
+            name: "patterns.json",
+            media_type: "application/json",
+            bytes: super::pattern::to_json(p).into_bytes(),
+        });
+        out.push(Artifact {
+            name: "patterns.svg",
+            media_type: "image/svg+xml",
+            bytes: super::pattern::to_svg(p).into_bytes(),
+        });
+        out.push(Artifact {
+            name: "patterns.dxf",
+            media_type: "image/vnd.dxf",
+            bytes: super::pattern::to_dxf(p).into_bytes(),
+        });
+    }
+    out
 }

@@ -8,6 +8,7 @@ pub mod artifacts;
 pub mod gltf;
 pub mod obj;
 pub mod off;
+pub mod pattern;
 
 use crate::mesh::{Mesh, MeshError, RawMesh, Warning};
 use std::path::Path;

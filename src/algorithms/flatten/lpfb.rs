@@ -71,16 +71,17 @@ impl Work {
     /// Evaluate φ (Eq. 7), the constraints g and their Jacobian Λ (Appendix, Statement 3).
     fn eval(&mut self, p: &Problem, l: &[f64], theta: &[f64], ap_target: &[f64]) {
         let n = self.n;
+        // φ_k (0-based) = (k+1)π − Σ_{b ≤ k} θ_b, summed as turning angles Σ (π − θ_b) so
+        // that no term is large: (k+1)π − Σθ would cancel ~nπ and lose ~n·1e-16 rad.
         let mut s = 0.0;
         for k in 0..n {
-            s += theta[k];
-            // φ_k (0-based) = (k+1)π − Σ_{b ≤ k} θ_b
-            self.phi[k] = (k + 1) as f64 * PI - s;
+            s += PI - theta[k];
+            self.phi[k] = s;
             self.ex[k] = l[k] * self.phi[k].cos();
             self.ey[k] = l[k] * self.phi[k].sin();
         }
-        // row 0: closed-path theorem, (n − 2)π − Σθ = 0
-        self.g[0] = (n as f64 - 2.0) * PI - s;
+        // row 0: closed-path theorem, (n − 2)π − Σθ = Σ(π − θ) − 2π = 0
+        self.g[0] = s - 2.0 * PI;
         self.lam_mat[..n].iter_mut().for_each(|x| *x = -1.0);
         let mut row = 1;
         let ranges = std::iter::once((0usize, n)).chain(p.pairs.iter().copied());
@@ -115,7 +116,10 @@ impl Work {
     fn gram(&self) -> Mat<f64> {
         let (n, r) = (self.n, self.r);
         Mat::from_fn(r, r, |i, j| {
-            let (a, b) = (&self.lam_mat[i * n..(i + 1) * n], &self.lam_mat[j * n..(j + 1) * n]);
+            let (a, b) = (
+                &self.lam_mat[i * n..(i + 1) * n],
+                &self.lam_mat[j * n..(j + 1) * n],
+            );
             a.iter().zip(b).map(|(x, y)| x * y).sum()
         })
     }
@@ -199,8 +203,8 @@ pub fn solve(
         let mut phi = vec![0.0; n];
         let mut s = 0.0;
         for k in 0..n {
-            s += theta[k];
-            phi[k] = (k + 1) as f64 * PI - s;
+            s += PI - theta[k];
+            phi[k] = s;
         }
         for (j, &(a, b)) in p.antiparallel.iter().enumerate() {
             let d = phi[b] - phi[a] - PI;

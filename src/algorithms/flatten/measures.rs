@@ -150,7 +150,10 @@ fn exact_orient(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> i8 {
 }
 
 fn on_segment(a: [f64; 2], b: [f64; 2], p: [f64; 2]) -> bool {
-    p[0] >= a[0].min(b[0]) && p[0] <= a[0].max(b[0]) && p[1] >= a[1].min(b[1]) && p[1] <= a[1].max(b[1])
+    p[0] >= a[0].min(b[0])
+        && p[0] <= a[0].max(b[0])
+        && p[1] >= a[1].min(b[1])
+        && p[1] <= a[1].max(b[1])
 }
 
 /// Whether closed segments ab and cd share a point.
@@ -190,7 +193,10 @@ pub fn boundary_intersections(uv: &[[f64; 2]], loops: &[Vec<u32>], vertex_ids: &
                 break;
             }
             let gid = |v: u32| vertex_ids[v as usize];
-            if [k, l].iter().any(|&v| v == i || v == j || gid(v) == gid(i) || gid(v) == gid(j)) {
+            if [k, l]
+                .iter()
+                .any(|&v| v == i || v == j || gid(v) == gid(i) || gid(v) == gid(j))
+            {
                 continue;
             }
             let (c, d) = (uv[k as usize], uv[l as usize]);
@@ -224,7 +230,8 @@ pub fn compute(
         let q = [uv[t[0] as usize], uv[t[1] as usize], uv[t[2] as usize]];
         for i in 0..3 {
             inner2d[t[i] as usize] += angle2(q[i], q[(i + 1) % 3], q[(i + 2) % 3]);
-            inner3d[t[i] as usize] += crate::geometry::corner_angle(p[i], p[(i + 1) % 3], p[(i + 2) % 3]);
+            inner3d[t[i] as usize] +=
+                crate::geometry::corner_angle(p[i], p[(i + 1) % 3], p[(i + 2) % 3]);
         }
         // local orthonormal frame of the 3D triangle
         let e1 = sub3(p[1], p[0]);
@@ -235,7 +242,11 @@ pub fn compute(
         let x = [e1[0] / l1, e1[1] / l1, e1[2] / l1];
         let y = cross3(crate::geometry::normalize(n), x);
         // 3D edge matrix P = [[l1, e2·x], [0, e2·y]]
-        let (p11, p12, p22) = (l1, e2[0] * x[0] + e2[1] * x[1] + e2[2] * x[2], e2[0] * y[0] + e2[1] * y[1] + e2[2] * y[2]);
+        let (p11, p12, p22) = (
+            l1,
+            e2[0] * x[0] + e2[1] * x[1] + e2[2] * x[2],
+            e2[0] * y[0] + e2[1] * y[1] + e2[2] * y[2],
+        );
         let f1 = [q[1][0] - q[0][0], q[1][1] - q[0][1]];
         let f2 = [q[2][0] - q[0][0], q[2][1] - q[0][1]];
         let a2 = 0.5 * (f1[0] * f2[1] - f1[1] * f2[0]);
@@ -290,7 +301,8 @@ pub fn compute(
             let l = (d[0] * d[0] + d[1] * d[1]).sqrt();
             sum_l += (l - l0).abs();
             if l0 > 0.0 {
-                m.boundary_length_max_rel_error = m.boundary_length_max_rel_error.max((l - l0).abs() / l0);
+                m.boundary_length_max_rel_error =
+                    m.boundary_length_max_rel_error.max((l - l0).abs() / l0);
             }
             sum_t += (inner3d[i] - inner2d[i]).abs();
             per2 += l;

@@ -236,7 +236,11 @@ pub fn lpfb_boundary(
         .tris
         .iter()
         .map(|t| {
-            let q = [p.pos[t[0] as usize], p.pos[t[1] as usize], p.pos[t[2] as usize]];
+            let q = [
+                p.pos[t[0] as usize],
+                p.pos[t[1] as usize],
+                p.pos[t[2] as usize],
+            ];
             [
                 crate::geometry::corner_angle(q[0], q[1], q[2]),
                 crate::geometry::corner_angle(q[1], q[2], q[0]),
@@ -247,7 +251,12 @@ pub fn lpfb_boundary(
     let cl = cut::cut_loop(p, &paths, &corner).map_err(err)?;
     let n = cl.vertex.len();
     let lengths: Vec<f64> = (0..n)
-        .map(|k| cut::dist(p.pos[cl.vertex[k] as usize], p.pos[cl.vertex[(k + 1) % n] as usize]))
+        .map(|k| {
+            cut::dist(
+                p.pos[cl.vertex[k] as usize],
+                p.pos[cl.vertex[(k + 1) % n] as usize],
+            )
+        })
         .collect();
     let problem = lpfb::Problem {
         lengths,

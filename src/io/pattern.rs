@@ -1,0 +1,384 @@
+//! Pattern export: JSON (mesh units), SVG and DXF (drawing units), and a minimal DXF reader
+//! used by the tests to read outlines back.
+//!
+//! Drawings place the pieces side by side without overlap (shelf packing of their bounding
+//! boxes, tallest first) and scale mesh units to the drawing unit (`Patterns::input_unit` →
+//! `Patterns::unit`). The SVG flips y (SVG's y points down) so pieces are not mirrored; the
+//! DXF keeps y up. Both use the same placement, [`layout`].
+
+use crate::pattern::Patterns;
+use std::fmt::Write;
+
+/// Millimetres per unit, for `mm`, `cm`, `m`, `in` (None for anything else).
+pub fn mm_per(unit: &str) -> Option<f64> {
+    match unit {
+        "mm" => Some(1.0),
+        "cm" => Some(10.0),
+        "m" => Some(1000.0),
+        "in" => Some(25.4),
+        _ => None,
+    }
+}
+
+/// Drawing units per mesh unit (1 when a unit is missing or unknown).
+pub fn scale(p: &Patterns) -> f64 {
+    match (mm_per(&p.input_unit), mm_per(&p.unit)) {
+        (Some(a), Some(b)) => a / b,
+        _ => 1.0,
+    }
+}
+
+/// Placement of each piece in the drawing: drawing = uv · scale + offset. Also returns the
+/// drawing's width and height. Shelf packing by bounding boxes, tallest first, shelves no
+/// wider than max(widest piece, 1.5 √(Σ box areas)); a gap of 3 % of the mean box size.
+pub fn layout(p: &Patterns) -> (Vec<[f64; 2]>, f64, f64) {
+    let s = scale(p);
+    let boxes: Vec<([f64; 2], [f64; 2])> = p
+        .pieces
+        .iter()
+        .map(|pc| {
+            let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+            for q in &pc.uv {
+                for k in 0..2 {
+                    lo[k] = lo[k].min(q[k] * s);
+                    hi[k] = hi[k].max(q[k] * s);
+                }
+            }
+            if pc.uv.is_empty() {
+                ([0.0; 2], [0.0; 2])
+            } else {
+                (lo, hi)
+            }
+        })
+        .collect();
+    let n = boxes.len().max(1) as f64;
+    let mean = boxes
+        .iter()
+        .map(|(lo, hi)| ((hi[0] - lo[0]) + (hi[1] - lo[1])) / 2.0)
+        .sum::<f64>()
+        / n;
+    let gap = 0.03 * mean.max(f64::MIN_POSITIVE);
+    let area: f64 = boxes
+        .iter()
+        .map(|(lo, hi)| (hi[0] - lo[0] + gap) * (hi[1] - lo[1] + gap))
+        .sum();
+    let widest = boxes
+        .iter()
+        .map(|(lo, hi)| hi[0] - lo[0])
+        .fold(0.0, f64::max);
+    let shelf_w = widest.max(1.5 * area.sqrt());
+    let mut order: Vec<usize> = (0..boxes.len()).collect();
+    order.sort_by(|&a, &b| {
+        let ha = boxes[a].1[1] - boxes[a].0[1];
+        let hb = boxes[b].1[1] - boxes[b].0[1];
+        hb.partial_cmp(&ha).unwrap_or(std::cmp::Ordering::Equal)
+    });
+    let mut off = vec![[0.0; 2]; boxes.len()];
+    let (mut x, mut y, mut shelf_h, mut width) = (gap, gap, 0.0f64, 0.0f64);
+    for i in order {
+        let (lo, hi) = boxes[i];
+        let (w, h) = (hi[0] - lo[0], hi[1] - lo[1]);
+        if x > gap && x + w > shelf_w + gap {
+            x = gap;
+            y += shelf_h + gap;
+            shelf_h = 0.0;
+        }
+        off[i] = [x - lo[0], y - lo[1]];
+        x += w + gap;
+        width = width.max(x);
+        shelf_h = shelf_h.max(h);
+    }
+    (off, width, y + shelf_h + gap)
+}
+
+/// `patterns.json`.
+pub fn to_json(p: &Patterns) -> String {
+    serde_json::to_string_pretty(p).unwrap_or_else(|_| "{}".into())
+}
+
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+/// `patterns.svg`: one `<g>` per piece (outlines, optionally triangles, name), seam labels
+/// `S<k>` at the middle edge of each seam on both pieces; width and height in real units.
+pub fn to_svg(p: &Patterns) -> String {
+    let s = scale(p);
+    let (off, w, h) = layout(p);
+    let unit = if mm_per(&p.unit).is_some() {
+        p.unit.as_str()
+    } else {
+        ""
+    };
+    // SVG lengths know mm, cm, in but not m: write metres as centimetres × 100.
+    let (wu, hu, uname) = if unit == "m" {
+        (w * 100.0, h * 100.0, "cm")
+    } else {
+        (w, h, unit)
+    };
+    let stroke = (w.max(h) / 1500.0).max(f64::MIN_POSITIVE);
+    let font = (w.max(h) / 80.0).max(f64::MIN_POSITIVE);
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        r#"<?xml version="1.0" encoding="UTF-8"?>
+<svg xmlns="http://www.w3.org/2000/svg" width="{wu}{uname}" height="{hu}{uname}" viewBox="0 0 {w} {h}">
+<!-- flatmesh patterns: 1 user unit = 1 {u}; mesh unit {iu} -->"#,
+        u = esc(&p.unit),
+        iu = esc(&p.input_unit)
+    );
+    let pt = |i: usize, q: [f64; 2]| -> (f64, f64) {
+        let x = q[0] * s + off[i][0];
+        let y = q[1] * s + off[i][1];
+        (x, h - y)
+    };
+    for (i, pc) in p.pieces.iter().enumerate() {
+        let _ = writeln!(out, r#"<g id="piece-{i}" data-patch="{}">"#, esc(&pc.patch));
+        if p.svg_triangles {
+            let mut d = String::new();
+            for t in &pc.triangles {
+                let (a, b, c) = (
+                    pt(i, pc.uv[t[0] as usize]),
+                    pt(i, pc.uv[t[1] as usize]),
+                    pt(i, pc.uv[t[2] as usize]),
+                );
+                let _ = write!(d, "M{} {}L{} {}L{} {}Z", a.0, a.1, b.0, b.1, c.0, c.1);
+            }
+            let _ = writeln!(
+                out,
+                r##"<path d="{d}" fill="none" stroke="#9ab" stroke-width="{}"/>"##,
+                stroke * 0.4
+            );
+        }
+        for lp in &pc.boundary_loops {
+            let mut d = String::new();
+            for (k, &v) in lp.iter().enumerate() {
+                let (x, y) = pt(i, pc.uv[v as usize]);
+                let _ = write!(d, "{}{} {}", if k == 0 { "M" } else { "L" }, x, y);
+            }
+            let _ = writeln!(
+                out,
+                r##"<path d="{d}Z" fill="none" stroke="#000" stroke-width="{stroke}"/>"##
+            );
+        }
+        if let Some(c) = centroid(&pc.uv) {
+            let (x, y) = pt(i, c);
+            let _ = writeln!(
+                out,
+                r#"<text x="{x}" y="{y}" font-size="{font}" text-anchor="middle">{}</text>"#,
+                esc(&pc.patch)
+            );
+        }
+        let _ = writeln!(out, "</g>");
+    }
+    let _ = writeln!(out, r##"<g id="seams" fill="#c00">"##);
+    for (k, sm) in p.seams.iter().enumerate() {
+        for side in 0..2 {
+            let pi = sm.pieces[side];
+            let Some(pc) = p.pieces.get(pi) else { continue };
+            let edges = &sm.edges[side];
+            if edges.is_empty() {
+                continue;
+            }
+            let e = edges[edges.len() / 2];
+            let (a, b) = (pc.uv[e[0] as usize], pc.uv[e[1] as usize]);
+            let (x, y) = pt(pi, [(a[0] + b[0]) / 2.0, (a[1] + b[1]) / 2.0]);
+            let _ = writeln!(
+                out,
+                r#"<text x="{x}" y="{y}" font-size="{}" text-anchor="middle">S{k}</text>"#,
+                font * 0.7
+            );
+        }
+    }
+    let _ = writeln!(out, "</g>\n</svg>");
+    out
+}
+
+fn centroid(uv: &[[f64; 2]]) -> Option<[f64; 2]> {
+    if uv.is_empty() {
+        return None;
+    }
+    let n = uv.len() as f64;
+    Some(
+        uv.iter()
+            .fold([0.0, 0.0], |s, q| [s[0] + q[0] / n, s[1] + q[1] / n]),
+    )
+}
+
+/// A DXF layer name for a piece: `P<i>_` and the patch name with characters outside
+/// `[A-Za-z0-9_-]` replaced by `_`.
+pub fn layer_name(i: usize, patch: &str) -> String {
+    let clean: String = patch
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '_' || c == '-' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .take(200)
+        .collect();
+    format!("P{i}_{clean}")
+}
+
+/// `patterns.dxf`: ASCII DXF R12; each boundary loop of each piece is a closed POLYLINE on the
+/// piece's own layer, in drawing units, placed by [`layout`]. Coordinates are written with
+/// Rust's shortest round-trip formatting, so reading them back gives the same doubles.
+pub fn to_dxf(p: &Patterns) -> String {
+    let s = scale(p);
+    let (off, w, h) = layout(p);
+    let mut o = String::new();
+    let mut pair = |code: i32, value: &str| {
+        let _ = write!(o, "{code}\n{value}\n");
+    };
+    pair(0, "SECTION");
+    pair(2, "HEADER");
+    pair(9, "$ACADVER");
+    pair(1, "AC1009");
+    pair(9, "$EXTMIN");
+    pair(10, "0");
+    pair(20, "0");
+    pair(9, "$EXTMAX");
+    pair(10, &w.to_string());
+    pair(20, &h.to_string());
+    pair(0, "ENDSEC");
+    pair(0, "SECTION");
+    pair(2, "TABLES");
+    pair(0, "TABLE");
+    pair(2, "LAYER");
+    pair(70, &p.pieces.len().to_string());
+    for (i, pc) in p.pieces.iter().enumerate() {
+        pair(0, "LAYER");
+        pair(2, &layer_name(i, &pc.patch));
+        pair(70, "0");
+        pair(62, &((i % 254) + 1).to_string());
+        pair(6, "CONTINUOUS");
+    }
+    pair(0, "ENDTAB");
+    pair(0, "ENDSEC");
+    pair(0, "SECTION");
+    pair(2, "ENTITIES");
+    for (i, pc) in p.pieces.iter().enumerate() {
+        let layer = layer_name(i, &pc.patch);
+        for lp in &pc.boundary_loops {
+            pair(0, "POLYLINE");
+            pair(8, &layer);
+            pair(66, "1");
+            pair(10, "0");
+            pair(20, "0");
+            pair(30, "0");
+            pair(70, "1");
+            for &v in lp {
+                let q = pc.uv[v as usize];
+                pair(0, "VERTEX");
+                pair(8, &layer);
+                pair(10, &(q[0] * s + off[i][0]).to_string());
+                pair(20, &(q[1] * s + off[i][1]).to_string());
+                pair(30, "0");
+            }
+            pair(0, "SEQEND");
+            pair(8, &layer);
+        }
+    }
+    pair(0, "ENDSEC");
+    pair(0, "EOF");
+    o
+}
+
+/// A polyline read back from a DXF.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DxfPolyline {
+    /// Layer name.
+    pub layer: String,
+    /// Whether flag 70 bit 1 (closed) is set.
+    pub closed: bool,
+    /// Vertices.
+    pub points: Vec<[f64; 2]>,
+}
+
+/// Read the POLYLINE (R12) and LWPOLYLINE entities of an ASCII DXF. Minimal: enough to check
+/// what [`to_dxf`] writes and what common CAD tools write for outlines.
+pub fn read_dxf_polylines(text: &str) -> Result<Vec<DxfPolyline>, String> {
+    let lines: Vec<&str> = text.lines().map(|l| l.trim()).collect();
+    if lines.len() % 2 != 0 {
+        return Err("DXF: odd number of lines".into());
+    }
+    let mut pairs = Vec::with_capacity(lines.len() / 2);
+    for (k, c) in lines.chunks(2).enumerate() {
+        let code: i32 = c[0].parse().map_err(|_| {
+            format!(
+                "DXF line {}: group code {:?} is not an integer",
+                2 * k + 1,
+                c[0]
+            )
+        })?;
+        pairs.push((code, c[1]));
+    }
+    let num = |v: &str, at: usize| -> Result<f64, String> {
+        v.parse::<f64>()
+            .map_err(|_| format!("DXF pair {at}: {v:?} is not a number"))
+    };
+    let mut out: Vec<DxfPolyline> = Vec::new();
+    let mut i = 0;
+    while i < pairs.len() {
+        let (code, v) = pairs[i];
+        if code == 0 && (v == "POLYLINE" || v == "LWPOLYLINE") {
+            let lw = v == "LWPOLYLINE";
+            let mut pl = DxfPolyline {
+                layer: String::new(),
+                closed: false,
+                points: Vec::new(),
+            };
+            i += 1;
+            // entity header (for LWPOLYLINE also the vertices)
+            let mut pending_x: Option<f64> = None;
+            while i < pairs.len() && pairs[i].0 != 0 {
+                let (c, v) = pairs[i];
+                match c {
+                    8 => pl.layer = v.to_string(),
+                    70 => pl.closed = v.parse::<i32>().map(|f| f & 1 == 1).unwrap_or(false),
+                    10 if lw => pending_x = Some(num(v, i)?),
+                    20 if lw => {
+                        let x = pending_x
+                            .take()
+                            .ok_or(format!("DXF pair {i}: y before x"))?;
+                        pl.points.push([x, num(v, i)?]);
+                    }
+                    _ => {}
+                }
+                i += 1;
+            }
+            if !lw {
+                while i < pairs.len() && pairs[i] == (0, "VERTEX") {
+                    i += 1;
+                    let (mut x, mut y) = (None, None);
+                    while i < pairs.len() && pairs[i].0 != 0 {
+                        match pairs[i].0 {
+                            10 => x = Some(num(pairs[i].1, i)?),
+                            20 => y = Some(num(pairs[i].1, i)?),
+                            _ => {}
+                        }
+                        i += 1;
+                    }
+                    match (x, y) {
+                        (Some(x), Some(y)) => pl.points.push([x, y]),
+                        _ => return Err(format!("DXF pair {i}: VERTEX without 10/20")),
+                    }
+                }
+                if i < pairs.len() && pairs[i] == (0, "SEQEND") {
+                    i += 1;
+                } else {
+                    return Err(format!("DXF pair {i}: POLYLINE without SEQEND"));
+                }
+            }
+            out.push(pl);
+            continue;
+        }
+        i += 1;
+    }
+    Ok(out)
+}
