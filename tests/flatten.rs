@@ -625,3 +625,184 @@ fn hemisphere_has_no_flip_and_no_overlap_lpfb_beside_lscm() {
         assert!(f(a, "l2_stretch") >= 1.0 - 1e-12 && f(b, "l2_stretch") >= 1.0 - 1e-12);
     }
 }
+
+/// The cylinder strip split into two patches along the generator i = 20: one seam whose 3D
+/// length is the strip's height, 0.9, exactly.
+fn two_patch_cylinder() -> Mesh {
+    let (mesh, _) = cylinder(40, 25, 2.0, |_, _| true);
+    let mut raw = mesh.to_raw();
+    let dt = 2.0 / 39.0;
+    raw.face_patch = raw
+        .triangles
+        .iter()
+        .map(|t| {
+            let c: f64 = t
+                .iter()
+                .map(|&v| {
+                    let p = raw.positions[v as usize];
+                    p[1].atan2(p[0]) / dt
+                })
+                .sum::<f64>()
+                / 3.0;
+            (c > 20.0) as u32
+        })
+        .collect();
+    raw.patch_names = vec!["left panel".into(), "right/panel".into()];
+    Mesh::new(raw).unwrap().0
+}
+
+#[test]
+fn seams_keep_their_length_on_both_pieces() {
+    let mesh = two_patch_cylinder();
+    for method in [Method::Lpfb, Method::Lscm] {
+        let pat = flatten_mesh(&mesh, method);
+        assert_eq!(pat.pieces.len(), 2);
+        assert_eq!(pat.seams.len(), 1);
+        let s = &pat.seams[0];
+        assert!((s.length_3d - 0.9).abs() < 1e-12, "{}", s.length_3d);
+        assert_eq!(s.patches, ["left panel".to_string(), "right/panel".to_string()]);
+        assert_eq!(s.edges[0].len(), 24);
+        assert_eq!(s.edges[1].len(), 24);
+        println!("{method:?}: seam 3D {} on pieces {:?}", s.length_3d, s.lengths);
+        if method == Method::Lpfb {
+            for l in s.lengths {
+                assert!((l - 0.9).abs() / 0.9 <= 1e-9, "{l}");
+            }
+        }
+    }
+}
+
+#[test]
+fn exports_read_back() {
+    use flatmesh::io::pattern;
+    let mesh = two_patch_cylinder();
+    let pat = flatten_mesh(&mesh, Method::Lpfb);
+    // JSON round trip
+    let back: Patterns = serde_json::from_str(&pattern::to_json(&pat)).unwrap();
+    assert_eq!(back.pieces.len(), 2);
+    for (a, b) in pat.pieces.iter().zip(&back.pieces) {
+        assert_eq!(a.vertex_ids, b.vertex_ids);
+        assert_eq!(a.triangles, b.triangles);
+        assert_eq!(a.boundary_loops, b.boundary_loops);
+        for (p, q) in a.uv.iter().zip(&b.uv) {
+            assert!((p[0] - q[0]).abs() <= 1e-15 && (p[1] - q[1]).abs() <= 1e-15);
+        }
+    }
+    // DXF: outlines come back on their own layers, in mm (input in m), placed as `layout` says
+    let dxf = pattern::to_dxf(&pat);
+    let polys = pattern::read_dxf_polylines(&dxf).unwrap();
+    assert_eq!(polys.len(), 2);
+    let (off, _, _) = pattern::layout(&pat);
+    let mut boxes = Vec::new();
+    for (i, piece) in pat.pieces.iter().enumerate() {
+        let pl = &polys[i];
+        assert_eq!(pl.layer, pattern::layer_name(i, &piece.patch));
+        assert!(pl.closed);
+        let lp = &piece.boundary_loops[0];
+        assert_eq!(pl.points.len(), lp.len());
+        for (k, &v) in lp.iter().enumerate() {
+            let q = piece.uv[v as usize];
+            let want = [q[0] * 1000.0 + off[i][0], q[1] * 1000.0 + off[i][1]];
+            let got = pl.points[k];
+            assert!((got[0] - want[0]).abs() <= 1e-9 * want[0].abs().max(1.0));
+            assert!((got[1] - want[1]).abs() <= 1e-9 * want[1].abs().max(1.0));
+        }
+        // perimeter in mm against the 3D perimeter in m
+        let per: f64 = (0..pl.points.len())
+            .map(|k| {
+                let (a, b) = (pl.points[k], pl.points[(k + 1) % pl.points.len()]);
+                ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt()
+            })
+            .sum();
+        let per3 = loop_len_3d(&mesh, piece, lp) * 1000.0;
+        assert!((per - per3).abs() / per3 < 1e-9, "{per} vs {per3}");
+        let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+        for p in &pl.points {
+            for k in 0..2 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+        boxes.push((lo, hi));
+    }
+    let (a, b) = (boxes[0], boxes[1]);
+    let disjoint = a.1[0] < b.0[0] || b.1[0] < a.0[0] || a.1[1] < b.0[1] || b.1[1] < a.0[1];
+    assert!(disjoint, "pieces overlap in the drawing: {boxes:?}");
+    // SVG: real size in mm, one group per piece, seam labels on both pieces
+    let svg = pattern::to_svg(&pat);
+    assert!(svg.contains(r#"width=""#) && svg.contains(r#"mm" height=""#));
+    assert_eq!(svg.matches("<g id=\"piece-").count(), 2);
+    assert_eq!(svg.matches(">S0</text>").count(), 2);
+    assert!(!svg.contains("NaN"));
+}
+
+#[test]
+fn params_are_checked() {
+    let bad = |json: &str| {
+        let m: serde_json::Map<String, serde_json::Value> = serde_json::from_str(json).unwrap();
+        algorithms::validate("flatten", &m)
+    };
+    assert!(bad(r#"{}"#).is_ok());
+    assert!(bad(r#"{"method": "lscm", "unit": "in", "input_unit": "cm"}"#).is_ok());
+    assert!(matches!(bad(r#"{"methd": "lscm"}"#), Err(algorithms::AlgoError::InvalidParam { key, .. }) if key == "methd"));
+    assert!(bad(r#"{"method": "abf"}"#).is_err());
+    assert!(bad(r#"{"unit": "ft"}"#).is_err());
+    assert!(matches!(bad(r#"{"tolerance": 0}"#), Err(algorithms::AlgoError::InvalidParam { key, .. }) if key == "tolerance"));
+    assert!(matches!(bad(r#"{"max_iterations": 0}"#), Err(algorithms::AlgoError::InvalidParam { key, .. }) if key == "max_iterations"));
+}
+
+#[test]
+fn closed_patch_is_refused_with_its_name() {
+    // octahedron: closed
+    let pos = vec![[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0]];
+    let tris = vec![[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]];
+    let mesh = mesh_of(pos, tris);
+    let e = flatten::run(&mesh, &Params::default(), &Silent::default()).unwrap_err();
+    assert!(matches!(&e, algorithms::AlgoError::Input(m) if m.contains("`p`") && m.contains("closed")), "{e}");
+}
+
+#[test]
+fn cancellation_is_honoured() {
+    let (mesh, _) = cylinder(20, 10, 2.0, |_, _| true);
+    let c = Silent::default();
+    c.cancel.store(true, std::sync::atomic::Ordering::Relaxed);
+    assert_eq!(flatten::run(&mesh, &Params::default(), &c).unwrap_err(), algorithms::AlgoError::Cancelled);
+}
+
+#[test]
+fn cli_writes_patterns() {
+    let dir = std::env::temp_dir().join(format!("flatmesh-flatten-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let obj = dir.join("two.obj");
+    std::fs::write(&obj, flatmesh::io::obj::write(&two_patch_cylinder().to_raw())).unwrap();
+    let out = dir.join("out");
+    let st = std::process::Command::new(env!("CARGO_BIN_EXE_flatmesh"))
+        .args(["run", "flatten"])
+        .arg(&obj)
+        .arg("--out")
+        .arg(&out)
+        .args(["--set", "method=lscm", "--set", "unit=cm"])
+        .output()
+        .unwrap();
+    assert!(st.status.success(), "{}", String::from_utf8_lossy(&st.stderr));
+    for f in ["patterns.json", "patterns.svg", "patterns.dxf", "report.json"] {
+        assert!(out.join(f).exists(), "{f}");
+    }
+    let rep: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(rep["method"], "lscm");
+    assert_eq!(rep["pieces"].as_array().unwrap().len(), 2);
+    assert_eq!(rep["seams"].as_array().unwrap().len(), 1);
+    assert!(rep["timings"]["total_s"].as_f64().unwrap() >= 0.0);
+    let svg = std::fs::read_to_string(out.join("patterns.svg")).unwrap();
+    assert!(svg.contains(r#"cm" height=""#));
+    let bad = std::process::Command::new(env!("CARGO_BIN_EXE_flatmesh"))
+        .args(["run", "flatten"])
+        .arg(&obj)
+        .arg("--out")
+        .arg(&out)
+        .args(["--set", "method=magic"])
+        .output()
+        .unwrap();
+    assert_eq!(bad.status.code(), Some(2));
+    let _ = std::fs::remove_dir_all(&dir);
+}
