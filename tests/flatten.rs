@@ -392,6 +392,31 @@ fn ipc_dress_panels_match_their_vt_pattern() {
         worst_bl = worst_bl.max(bl);
     }
     println!("ipc dress: worst {worst:.3e}, worst boundary {worst_bl:.3e}");
+    // the drawing places the 14 pieces without overlap (bounding boxes pairwise disjoint)
+    let (off, w, h) = flatmesh::io::pattern::layout(&pat);
+    let s = flatmesh::io::pattern::scale(&pat);
+    assert_eq!(s, 1000.0);
+    let boxes: Vec<([f64; 2], [f64; 2])> = pat
+        .pieces
+        .iter()
+        .zip(&off)
+        .map(|(p, o)| {
+            let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+            for q in &p.uv {
+                for k in 0..2 {
+                    lo[k] = lo[k].min(q[k] * s + o[k]);
+                    hi[k] = hi[k].max(q[k] * s + o[k]);
+                }
+            }
+            (lo, hi)
+        })
+        .collect();
+    for (i, a) in boxes.iter().enumerate() {
+        assert!(a.0[0] >= 0.0 && a.0[1] >= 0.0 && a.1[0] <= w && a.1[1] <= h);
+        for b in &boxes[i + 1..] {
+            assert!(a.1[0] < b.0[0] || b.1[0] < a.0[0] || a.1[1] < b.0[1] || b.1[1] < a.0[1]);
+        }
+    }
 }
 
 #[test]
@@ -660,10 +685,16 @@ fn seams_keep_their_length_on_both_pieces() {
         assert_eq!(pat.seams.len(), 1);
         let s = &pat.seams[0];
         assert!((s.length_3d - 0.9).abs() < 1e-12, "{}", s.length_3d);
-        assert_eq!(s.patches, ["left panel".to_string(), "right/panel".to_string()]);
+        assert_eq!(
+            s.patches,
+            ["left panel".to_string(), "right/panel".to_string()]
+        );
         assert_eq!(s.edges[0].len(), 24);
         assert_eq!(s.edges[1].len(), 24);
-        println!("{method:?}: seam 3D {} on pieces {:?}", s.length_3d, s.lengths);
+        println!(
+            "{method:?}: seam 3D {} on pieces {:?}",
+            s.length_3d, s.lengths
+        );
         if method == Method::Lpfb {
             for l in s.lengths {
                 assert!((l - 0.9).abs() / 0.9 <= 1e-9, "{l}");
@@ -744,21 +775,46 @@ fn params_are_checked() {
     };
     assert!(bad(r#"{}"#).is_ok());
     assert!(bad(r#"{"method": "lscm", "unit": "in", "input_unit": "cm"}"#).is_ok());
-    assert!(matches!(bad(r#"{"methd": "lscm"}"#), Err(algorithms::AlgoError::InvalidParam { key, .. }) if key == "methd"));
+    assert!(
+        matches!(bad(r#"{"methd": "lscm"}"#), Err(algorithms::AlgoError::InvalidParam { key, .. }) if key == "methd")
+    );
     assert!(bad(r#"{"method": "abf"}"#).is_err());
     assert!(bad(r#"{"unit": "ft"}"#).is_err());
-    assert!(matches!(bad(r#"{"tolerance": 0}"#), Err(algorithms::AlgoError::InvalidParam { key, .. }) if key == "tolerance"));
-    assert!(matches!(bad(r#"{"max_iterations": 0}"#), Err(algorithms::AlgoError::InvalidParam { key, .. }) if key == "max_iterations"));
+    assert!(
+        matches!(bad(r#"{"tolerance": 0}"#), Err(algorithms::AlgoError::InvalidParam { key, .. }) if key == "tolerance")
+    );
+    assert!(
+        matches!(bad(r#"{"max_iterations": 0}"#), Err(algorithms::AlgoError::InvalidParam { key, .. }) if key == "max_iterations")
+    );
 }
 
 #[test]
 fn closed_patch_is_refused_with_its_name() {
     // octahedron: closed
-    let pos = vec![[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0]];
-    let tris = vec![[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]];
+    let pos = vec![
+        [1.0, 0.0, 0.0],
+        [-1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [0.0, -1.0, 0.0],
+        [0.0, 0.0, 1.0],
+        [0.0, 0.0, -1.0],
+    ];
+    let tris = vec![
+        [0, 2, 4],
+        [2, 1, 4],
+        [1, 3, 4],
+        [3, 0, 4],
+        [2, 0, 5],
+        [1, 2, 5],
+        [3, 1, 5],
+        [0, 3, 5],
+    ];
     let mesh = mesh_of(pos, tris);
     let e = flatten::run(&mesh, &Params::default(), &Silent::default()).unwrap_err();
-    assert!(matches!(&e, algorithms::AlgoError::Input(m) if m.contains("`p`") && m.contains("closed")), "{e}");
+    assert!(
+        matches!(&e, algorithms::AlgoError::Input(m) if m.contains("`p`") && m.contains("closed")),
+        "{e}"
+    );
 }
 
 #[test]
@@ -766,7 +822,10 @@ fn cancellation_is_honoured() {
     let (mesh, _) = cylinder(20, 10, 2.0, |_, _| true);
     let c = Silent::default();
     c.cancel.store(true, std::sync::atomic::Ordering::Relaxed);
-    assert_eq!(flatten::run(&mesh, &Params::default(), &c).unwrap_err(), algorithms::AlgoError::Cancelled);
+    assert_eq!(
+        flatten::run(&mesh, &Params::default(), &c).unwrap_err(),
+        algorithms::AlgoError::Cancelled
+    );
 }
 
 #[test]
@@ -774,7 +833,11 @@ fn cli_writes_patterns() {
     let dir = std::env::temp_dir().join(format!("flatmesh-flatten-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let obj = dir.join("two.obj");
-    std::fs::write(&obj, flatmesh::io::obj::write(&two_patch_cylinder().to_raw())).unwrap();
+    std::fs::write(
+        &obj,
+        flatmesh::io::obj::write(&two_patch_cylinder().to_raw()),
+    )
+    .unwrap();
     let out = dir.join("out");
     let st = std::process::Command::new(env!("CARGO_BIN_EXE_flatmesh"))
         .args(["run", "flatten"])
@@ -784,11 +847,21 @@ fn cli_writes_patterns() {
         .args(["--set", "method=lscm", "--set", "unit=cm"])
         .output()
         .unwrap();
-    assert!(st.status.success(), "{}", String::from_utf8_lossy(&st.stderr));
-    for f in ["patterns.json", "patterns.svg", "patterns.dxf", "report.json"] {
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    for f in [
+        "patterns.json",
+        "patterns.svg",
+        "patterns.dxf",
+        "report.json",
+    ] {
         assert!(out.join(f).exists(), "{f}");
     }
-    let rep: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+    let rep: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
     assert_eq!(rep["method"], "lscm");
     assert_eq!(rep["pieces"].as_array().unwrap().len(), 2);
     assert_eq!(rep["seams"].as_array().unwrap().len(), 1);

@@ -327,6 +327,10 @@ pub fn flatten_piece(
             if control.cancelled() {
                 return Err(AlgoError::Cancelled);
             }
+            control.progress(&super::Progress {
+                stage: format!("lscm {}", p.name),
+                ..super::Progress::default()
+            });
             let uv = param::lscm(&p.pos, &p.tris, &p.loops).map_err(err)?;
             info.seconds_param = t0.elapsed().as_secs_f64();
             uv
