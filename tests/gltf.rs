@@ -570,6 +570,47 @@ fn an_indexed_file_keeps_its_own_cuts() {
 }
 
 #[test]
+fn vertices_split_for_flat_shading_are_kept_with_a_warning() {
+    // A cube exported flat-shaded: 24 vertices (4 per face), 12 triangles, the layout of the
+    // Khronos "Box" sample. The file's connectivity is six separate squares.
+    let mut pts = Vec::new();
+    let mut idx: Vec<u8> = Vec::new();
+    for axis in 0..3 {
+        for side in [0.0f32, 1.0] {
+            let base = pts.len() as u8;
+            for (u, v) in [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)] {
+                let mut p = [0.0f32; 3];
+                p[axis] = side;
+                p[(axis + 1) % 3] = u;
+                p[(axis + 2) % 3] = v;
+                pts.push(p);
+            }
+            if side == 0.0 {
+                idx.extend([base, base + 2, base + 1, base, base + 3, base + 2]);
+            } else {
+                idx.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
+            }
+        }
+    }
+    let mut d = Doc::new();
+    let pos = d.positions(&pts);
+    let i = d.indices_u8(&idx);
+    let doc = d.finish(
+        json!([{"primitives": [{"attributes": {"POSITION": pos}, "indices": i}]}]),
+        json!([{"mesh": 0}]),
+    );
+    let (mesh, warnings) = read_doc(&doc).unwrap();
+    assert_eq!(mesh.num_vertices(), 24);
+    assert_eq!(mesh.conn().components(mesh.num_faces()), 6);
+    let w = warnings
+        .iter()
+        .find(|w| w.code == "coincident_vertices_kept")
+        .expect("a warning about split vertices");
+    // 8 corners, each present 3 times: 16 extra copies.
+    assert!(w.message.contains("16 vertices"), "{}", w.message);
+}
+
+#[test]
 fn other_modes_are_skipped_with_a_warning() {
     let mut d = Doc::new();
     let pos = d.positions(&SQUARE);

@@ -400,6 +400,7 @@ fn assemble(doc: &gltf::Gltf, buffers: &[Vec<u8>]) -> Result<(RawMesh, Vec<Warni
                         Some(&v) => v,
                         None => {
                             let local = read_positions(&pos_acc, buffers)?;
+                            warn_split_vertices(&local, &where_, &mut warnings);
                             let base = positions.len() as u32;
                             positions
                                 .extend(local.iter().map(|&p| transform_point(&inst.world, p)));
@@ -483,6 +484,25 @@ fn assemble(doc: &gltf::Gltf, buffers: &[Vec<u8>]) -> Result<(RawMesh, Vec<Warni
         },
         warnings,
     ))
+}
+
+/// Exporters split a vertex where its normal or texture coordinate changes (flat shading, UV
+/// seams). Those splits are kept, because an indexed file's connectivity is its own and a cut
+/// looks the same, but the user is told, since they open the surface along the split.
+fn warn_split_vertices(local: &[[f32; 3]], where_: &str, warnings: &mut Vec<Warning>) {
+    let mut seen: HashMap<[u32; 3], ()> = HashMap::with_capacity(local.len());
+    let duplicates = local
+        .iter()
+        .filter(|p| seen.insert(p.map(f32::to_bits), ()).is_some())
+        .count();
+    if duplicates > 0 {
+        warnings.push(Warning::new(
+            "coincident_vertices_kept",
+            format!(
+                "{where_}: {duplicates} vertices coincide with another vertex of the same accessor (split for normals or texture coordinates?); they are kept apart, which opens the surface there: export with merged vertices, or as OBJ, to measure it as one surface"
+            ),
+        ));
+    }
 }
 
 /// Weld border vertices of different spaces that coincide within [`WELD_RELATIVE`] × the
