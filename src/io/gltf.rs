@@ -1,14 +1,811 @@
-//! glTF 2.0 reader and GLB writer (being written).
+//! glTF 2.0 reader (`.gltf` with embedded `data:` buffers, and `.glb`) and writer (GLB and
+//! `.gltf` with an embedded buffer).
+//!
+//! Reading: the `gltf` crate parses and validates the JSON (it panics on some malformed input,
+//! ../shared/CRATES.md, so the call is guarded by `catch_unwind`). Buffer data is then read
+//! here, not through the crate's reader: every accessor we use is bounds-checked against its
+//! buffer view and buffer with checked arithmetic *before* anything is allocated, so an
+//! accessor claiming 2³² elements is refused instead of allocated. External and `file:` URIs
+//! are never followed.
+//!
+//! Assembly: every TRIANGLES primitive of the default scene becomes one patch, with node
+//! transforms applied (a mirroring transform reverses the winding so normals stay outward).
+//! Vertices live in *spaces*: one per (node, POSITION accessor) for indexed primitives, so
+//! primitives that share an accessor share vertices exactly as the file says, and one per
+//! non-indexed primitive, whose corners are joined when their positions are bit-identical
+//! (a non-indexed primitive has no other way to say two corners are one vertex). Across
+//! spaces, border vertices (on an edge used once within their space) that coincide within
+//! [`WELD_RELATIVE`] × the bounding-box diagonal are welded, so that panels exported as
+//! separate primitives stay connected along their seams. Within a space nothing is welded: an
+//! indexed file's own connectivity (a cut, say) is respected.
+//!
+//! Writing: one POSITION, NORMAL, `_FLATTENABILITY` and COLOR_0 accessor for all vertices,
+//! in the mesh's vertex order, and one primitive per patch with its own indices, so that a
+//! written file reads back with the same vertex numbering and patches. glTF stores positions
+//! as f32; use OBJ when full f64 precision matters. The JSON is built with `serde_json` and the
+//! GLB container (a 12-byte header and two padded chunks) is written here, which keeps the
+//! alignment rules in plain sight.
 
 use super::ReadError;
-use crate::mesh::{RawMesh, Warning};
+use crate::geometry;
+use crate::mesh::{Mesh, RawMesh, Warning};
+use base64::Engine;
+use std::collections::HashMap;
 
-/// Parse `.gltf` (embedded buffers) or `.glb` bytes.
-pub fn read(_bytes: &[u8]) -> Result<(RawMesh, Vec<Warning>), ReadError> {
-    Err(ReadError::Gltf("not implemented yet".into()))
+/// Coincident border vertices of different spaces are welded within this fraction of the
+/// bounding-box diagonal. f32 positions carry a relative error near 6e-8, and a node transform
+/// adds a few more ulps; 1e-6 is well above that and well below any real edge.
+pub const WELD_RELATIVE: f64 = 1e-6;
+
+/// The most triangles (after instancing) a file may produce; bounds memory on hostile input.
+pub const MAX_TRIANGLES: usize = 1 << 25;
+
+/// ϖ at or below this is the coolest colour of the heat map (the developable tolerance).
+pub const HEATMAP_MIN: f64 = geometry::DEVELOPABLE_TOLERANCE;
+/// ϖ at or above this (radians) is the hottest colour.
+pub const HEATMAP_MAX: f64 = 1.0;
+/// Colour of vertices where ϖ is not defined (boundary, seam, unreferenced).
+const NON_INTERIOR_COLOR: [f32; 3] = [0.6, 0.6, 0.6];
+
+fn err(msg: impl Into<String>) -> ReadError {
+    ReadError::Gltf(msg.into())
 }
 
-/// GLB writer (being written).
-pub fn write_glb(_mesh: &crate::mesh::Mesh, _flattenability: Option<&[f64]>) -> Vec<u8> {
-    Vec::new()
+/// Parse `.gltf` (embedded buffers) or `.glb` bytes.
+pub fn read(bytes: &[u8]) -> Result<(RawMesh, Vec<Warning>), ReadError> {
+    let parsed = std::panic::catch_unwind(|| gltf::Gltf::from_slice(bytes));
+    let doc = match parsed {
+        Ok(Ok(doc)) => doc,
+        Ok(Err(e)) => return Err(err(describe_gltf_error(&e))),
+        Err(_) => return Err(err("malformed document (the glTF parser rejected it)")),
+    };
+    let buffers = resolve_buffers(&doc)?;
+    assemble(&doc, &buffers)
+}
+
+fn describe_gltf_error(e: &gltf::Error) -> String {
+    match e {
+        gltf::Error::Validation(list) => {
+            let shown: Vec<String> = list
+                .iter()
+                .take(3)
+                .map(|(path, e)| format!("{}: {e}", path.as_str()))
+                .collect();
+            let more = if list.len() > 3 {
+                format!(" (and {} more)", list.len() - 3)
+            } else {
+                String::new()
+            };
+            format!("invalid document: {}{more}", shown.join("; "))
+        }
+        other => format!("cannot parse: {other}"),
+    }
+}
+
+/// Buffer data by index: the GLB binary chunk or a decoded `data:` URI.
+fn resolve_buffers(doc: &gltf::Gltf) -> Result<Vec<Vec<u8>>, ReadError> {
+    let mut out = Vec::new();
+    for buffer in doc.buffers() {
+        let i = buffer.index();
+        let data = match buffer.source() {
+            gltf::buffer::Source::Bin => doc
+                .blob
+                .clone()
+                .ok_or_else(|| err(format!("buffers[{i}]: no uri and no GLB binary chunk")))?,
+            gltf::buffer::Source::Uri(uri) => {
+                decode_data_uri(uri).map_err(|m| err(format!("buffers[{i}]: {m}")))?
+            }
+        };
+        if data.len() < buffer.length() {
+            return Err(err(format!(
+                "buffers[{i}]: byteLength is {} but only {} bytes of data are present",
+                buffer.length(),
+                data.len()
+            )));
+        }
+        out.push(data);
+    }
+    Ok(out)
+}
+
+fn decode_data_uri(uri: &str) -> Result<Vec<u8>, String> {
+    let Some(rest) = uri.strip_prefix("data:") else {
+        let shown: String = uri.chars().take(60).collect();
+        return Err(format!(
+            "external URI `{shown}` is not followed; embed buffers as data: URIs or send a .glb"
+        ));
+    };
+    let Some(pos) = rest.find(";base64,") else {
+        return Err("data: URI is not base64-encoded".into());
+    };
+    base64::engine::general_purpose::STANDARD
+        .decode(&rest[pos + 8..])
+        .map_err(|e| format!("data: URI is not valid base64 ({e})"))
+}
+
+/// Element layout of an accessor, checked against its view and buffer.
+struct Span<'a> {
+    data: &'a [u8],
+    stride: usize,
+    count: usize,
+}
+
+/// Bounds-check an accessor of `components` × `component_size` bytes per element and return
+/// its bytes, or say precisely what does not fit.
+fn span<'a>(
+    accessor: &gltf::Accessor,
+    buffers: &'a [Vec<u8>],
+    component_size: usize,
+    components: usize,
+) -> Result<Span<'a>, ReadError> {
+    let a = accessor.index();
+    if accessor.sparse().is_some() {
+        return Err(err(format!(
+            "accessors[{a}]: sparse accessors are not supported"
+        )));
+    }
+    let view = accessor
+        .view()
+        .ok_or_else(|| err(format!("accessors[{a}]: no bufferView (not supported)")))?;
+    let elem = component_size * components;
+    let stride = view.stride().unwrap_or(elem);
+    if stride < elem {
+        return Err(err(format!(
+            "accessors[{a}]: byteStride {stride} is smaller than the element size {elem}"
+        )));
+    }
+    let buffer = &buffers[view.buffer().index()];
+    let v = view.index();
+    let view_end = view
+        .offset()
+        .checked_add(view.length())
+        .filter(|&end| end <= buffer.len())
+        .ok_or_else(|| {
+            err(format!(
+                "bufferViews[{v}]: offset {} + length {} exceeds buffer {} of {} bytes",
+                view.offset(),
+                view.length(),
+                view.buffer().index(),
+                buffer.len()
+            ))
+        })?;
+    let view_data = &buffer[view.offset()..view_end];
+    let count = accessor.count();
+    let needed = if count == 0 {
+        Some(0)
+    } else {
+        (count - 1)
+            .checked_mul(stride)
+            .and_then(|x| x.checked_add(elem))
+            .and_then(|x| x.checked_add(accessor.offset()))
+    };
+    match needed {
+        Some(n) if n <= view_data.len() => Ok(Span {
+            data: &view_data[accessor.offset().min(view_data.len())..],
+            stride,
+            count,
+        }),
+        _ => Err(err(format!(
+            "accessors[{a}]: {count} elements of {elem} bytes (stride {stride}, offset {}) do not fit in bufferViews[{v}] of {} bytes",
+            accessor.offset(),
+            view_data.len()
+        ))),
+    }
+}
+
+fn read_positions(
+    accessor: &gltf::Accessor,
+    buffers: &[Vec<u8>],
+) -> Result<Vec<[f32; 3]>, ReadError> {
+    use gltf::accessor::{DataType, Dimensions};
+    let a = accessor.index();
+    if accessor.data_type() != DataType::F32 || accessor.dimensions() != Dimensions::Vec3 {
+        return Err(err(format!(
+            "accessors[{a}]: POSITION must be VEC3 of FLOAT (quantized positions are not supported)"
+        )));
+    }
+    let s = span(accessor, buffers, 4, 3)?;
+    let mut out = Vec::with_capacity(s.count);
+    for i in 0..s.count {
+        let o = i * s.stride;
+        let f = |k: usize| {
+            let b = &s.data[o + 4 * k..o + 4 * k + 4];
+            f32::from_le_bytes([b[0], b[1], b[2], b[3]])
+        };
+        let p = [f(0), f(1), f(2)];
+        if !p.iter().all(|c| c.is_finite()) {
+            return Err(err(format!(
+                "accessors[{a}]: element {i} has a non-finite coordinate"
+            )));
+        }
+        out.push(p);
+    }
+    Ok(out)
+}
+
+fn read_indices(accessor: &gltf::Accessor, buffers: &[Vec<u8>]) -> Result<Vec<u32>, ReadError> {
+    use gltf::accessor::{DataType, Dimensions};
+    let a = accessor.index();
+    let size = match accessor.data_type() {
+        DataType::U8 => 1,
+        DataType::U16 => 2,
+        DataType::U32 => 4,
+        other => {
+            return Err(err(format!(
+                "accessors[{a}]: indices must be UNSIGNED_BYTE, UNSIGNED_SHORT or UNSIGNED_INT, not {other:?}"
+            )))
+        }
+    };
+    if accessor.dimensions() != Dimensions::Scalar {
+        return Err(err(format!("accessors[{a}]: indices must be SCALAR")));
+    }
+    let s = span(accessor, buffers, size, 1)?;
+    let mut out = Vec::with_capacity(s.count);
+    for i in 0..s.count {
+        let b = &s.data[i * s.stride..];
+        out.push(match size {
+            1 => u32::from(b[0]),
+            2 => u32::from(u16::from_le_bytes([b[0], b[1]])),
+            _ => u32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+        });
+    }
+    Ok(out)
+}
+
+type Mat4 = [[f64; 4]; 4];
+
+fn mat_mul(a: &Mat4, b: &Mat4) -> Mat4 {
+    // Column-major: (a·b)[c][r] = Σ_k a[k][r] b[c][k].
+    let mut m = [[0.0; 4]; 4];
+    for (c, col) in m.iter_mut().enumerate() {
+        for (r, x) in col.iter_mut().enumerate() {
+            *x = (0..4).map(|k| a[k][r] * b[c][k]).sum();
+        }
+    }
+    m
+}
+
+fn transform_point(m: &Mat4, p: [f32; 3]) -> [f64; 3] {
+    let p = [f64::from(p[0]), f64::from(p[1]), f64::from(p[2])];
+    let mut out = [0.0; 3];
+    for (r, o) in out.iter_mut().enumerate() {
+        *o = m[0][r] * p[0] + m[1][r] * p[1] + m[2][r] * p[2] + m[3][r];
+    }
+    out
+}
+
+fn det3(m: &Mat4) -> f64 {
+    m[0][0] * (m[1][1] * m[2][2] - m[2][1] * m[1][2])
+        - m[1][0] * (m[0][1] * m[2][2] - m[2][1] * m[0][2])
+        + m[2][0] * (m[0][1] * m[1][2] - m[1][1] * m[0][2])
+}
+
+/// A triangle primitive placed in the scene.
+struct Instance<'a> {
+    node: usize,
+    world: Mat4,
+    mesh: gltf::Mesh<'a>,
+}
+
+/// Nodes of the default scene (else the first scene, else every root node) with world
+/// matrices. glTF requires the node hierarchy to be a forest; a node reached twice (a cycle or
+/// two parents) is refused rather than followed.
+fn scene_instances(doc: &gltf::Document) -> Result<Vec<Instance<'_>>, ReadError> {
+    let roots: Vec<gltf::Node> = match doc.default_scene().or_else(|| doc.scenes().next()) {
+        Some(scene) => scene.nodes().collect(),
+        None => {
+            let mut is_child = vec![false; doc.nodes().len()];
+            for n in doc.nodes() {
+                for c in n.children() {
+                    is_child[c.index()] = true;
+                }
+            }
+            doc.nodes().filter(|n| !is_child[n.index()]).collect()
+        }
+    };
+    let identity: Mat4 = [
+        [1.0, 0.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0, 0.0],
+        [0.0, 0.0, 1.0, 0.0],
+        [0.0, 0.0, 0.0, 1.0],
+    ];
+    let mut seen = vec![false; doc.nodes().len()];
+    let mut stack: Vec<(gltf::Node, Mat4)> =
+        roots.into_iter().rev().map(|n| (n, identity)).collect();
+    let mut out = Vec::new();
+    while let Some((node, parent)) = stack.pop() {
+        let i = node.index();
+        if std::mem::replace(&mut seen[i], true) {
+            return Err(err(format!(
+                "nodes[{i}] is reached twice in the scene graph (glTF requires a tree)"
+            )));
+        }
+        let local = node.transform().matrix().map(|c| c.map(f64::from));
+        let world = mat_mul(&parent, &local);
+        if !world.iter().flatten().all(|x| x.is_finite()) {
+            return Err(err(format!("nodes[{i}]: transform is not finite")));
+        }
+        if let Some(mesh) = node.mesh() {
+            out.push(Instance {
+                node: i,
+                world,
+                mesh,
+            });
+        }
+        let children: Vec<gltf::Node> = node.children().collect();
+        for c in children.into_iter().rev() {
+            stack.push((c, world));
+        }
+    }
+    Ok(out)
+}
+
+fn patch_name(mesh: &gltf::Mesh, prim: &gltf::Primitive) -> String {
+    if let Some(raw) = prim.extras() {
+        if let Ok(serde_json::Value::Object(map)) = serde_json::from_str(raw.get()) {
+            if let Some(serde_json::Value::String(s)) = map.get("patch") {
+                return s.clone();
+            }
+        }
+    }
+    let base = mesh
+        .name()
+        .map(str::to_string)
+        .unwrap_or_else(|| format!("mesh{}", mesh.index()));
+    if mesh.primitives().len() == 1 {
+        return base;
+    }
+    match prim.material().name() {
+        Some(m) => format!("{base}/{m}"),
+        None => format!("{base}/{}", prim.index()),
+    }
+}
+
+fn assemble(doc: &gltf::Gltf, buffers: &[Vec<u8>]) -> Result<(RawMesh, Vec<Warning>), ReadError> {
+    let mut warnings = Vec::new();
+    let mut positions: Vec<[f64; 3]> = Vec::new();
+    let mut space_of_vertex: Vec<u32> = Vec::new();
+    let mut triangles: Vec<[u32; 3]> = Vec::new();
+    let mut face_patch: Vec<u32> = Vec::new();
+    let mut patch_names: Vec<String> = Vec::new();
+    let mut name_count: HashMap<String, usize> = HashMap::new();
+    // (node, POSITION accessor) → first vertex of that space.
+    let mut spaces: HashMap<(usize, usize), (u32, usize)> = HashMap::new();
+    let mut num_spaces = 0u32;
+
+    for inst in scene_instances(doc)? {
+        let flip = det3(&inst.world) < 0.0;
+        for prim in inst.mesh.primitives() {
+            let where_ = format!("meshes[{}].primitives[{}]", inst.mesh.index(), prim.index());
+            if prim.mode() != gltf::mesh::Mode::Triangles {
+                warnings.push(Warning::new(
+                    "primitive_skipped",
+                    format!("{where_}: mode {:?} is not TRIANGLES; skipped", prim.mode()),
+                ));
+                continue;
+            }
+            let Some(pos_acc) = prim.get(&gltf::Semantic::Positions) else {
+                warnings.push(Warning::new(
+                    "primitive_skipped",
+                    format!("{where_}: no POSITION attribute; skipped"),
+                ));
+                continue;
+            };
+            let indexed = prim.indices();
+            // Vertices of this primitive's space, and the local → global map.
+            let (base, nverts, corners): (u32, usize, Vec<u32>) = match &indexed {
+                Some(idx_acc) => {
+                    let key = (inst.node, pos_acc.index());
+                    let (base, n) = match spaces.get(&key) {
+                        Some(&v) => v,
+                        None => {
+                            let local = read_positions(&pos_acc, buffers)?;
+                            warn_split_vertices(&local, &where_, &mut warnings);
+                            let base = positions.len() as u32;
+                            positions
+                                .extend(local.iter().map(|&p| transform_point(&inst.world, p)));
+                            space_of_vertex.extend(std::iter::repeat_n(num_spaces, local.len()));
+                            num_spaces += 1;
+                            spaces.insert(key, (base, local.len()));
+                            (base, local.len())
+                        }
+                    };
+                    (base, n, read_indices(idx_acc, buffers)?)
+                }
+                None => {
+                    // Non-indexed: join bit-identical corners within the primitive.
+                    let local = read_positions(&pos_acc, buffers)?;
+                    let base = positions.len() as u32;
+                    let mut index_of: HashMap<[u32; 3], u32> = HashMap::new();
+                    let mut corners = Vec::with_capacity(local.len());
+                    for p in &local {
+                        let key = p.map(f32::to_bits);
+                        let next = index_of.len() as u32;
+                        let id = *index_of.entry(key).or_insert_with(|| {
+                            positions.push(transform_point(&inst.world, *p));
+                            space_of_vertex.push(num_spaces);
+                            next
+                        });
+                        corners.push(id);
+                    }
+                    num_spaces += 1;
+                    (base, index_of.len(), corners)
+                }
+            };
+            if corners.len() % 3 != 0 {
+                return Err(err(format!(
+                    "{where_}: {} indices is not a multiple of 3",
+                    corners.len()
+                )));
+            }
+            if triangles.len() + corners.len() / 3 > MAX_TRIANGLES {
+                return Err(err(format!(
+                    "more than {MAX_TRIANGLES} triangles after instancing; refused"
+                )));
+            }
+            if corners.is_empty() {
+                continue;
+            }
+            let mut name = patch_name(&inst.mesh, &prim);
+            let count = name_count.entry(name.clone()).or_insert(0);
+            *count += 1;
+            if *count > 1 {
+                name = format!("{name}#{count}");
+            }
+            let patch = patch_names.len() as u32;
+            patch_names.push(name);
+            for (t, c) in corners.chunks_exact(3).enumerate() {
+                if let Some(&bad) = c.iter().find(|&&i| i as usize >= nverts) {
+                    return Err(err(format!(
+                        "{where_}: triangle {t} uses vertex {bad} but the primitive has {nverts} vertices"
+                    )));
+                }
+                let tri = if flip {
+                    [base + c[0], base + c[2], base + c[1]]
+                } else {
+                    [base + c[0], base + c[1], base + c[2]]
+                };
+                triangles.push(tri);
+                face_patch.push(patch);
+            }
+        }
+    }
+    if triangles.is_empty() {
+        return Err(err("the default scene has no triangle primitive"));
+    }
+    let (positions, triangles) = weld_spaces(positions, &space_of_vertex, triangles, &mut warnings);
+    Ok((
+        RawMesh {
+            positions,
+            triangles,
+            face_patch,
+            patch_names,
+            uv: None,
+        },
+        warnings,
+    ))
+}
+
+/// Exporters split a vertex where its normal or texture coordinate changes (flat shading, UV
+/// seams). Those splits are kept, because an indexed file's connectivity is its own and a cut
+/// looks the same, but the user is told, since they open the surface along the split.
+fn warn_split_vertices(local: &[[f32; 3]], where_: &str, warnings: &mut Vec<Warning>) {
+    let mut seen: HashMap<[u32; 3], ()> = HashMap::with_capacity(local.len());
+    let duplicates = local
+        .iter()
+        .filter(|p| seen.insert(p.map(f32::to_bits), ()).is_some())
+        .count();
+    if duplicates > 0 {
+        warnings.push(Warning::new(
+            "coincident_vertices_kept",
+            format!(
+                "{where_}: {duplicates} vertices coincide with another vertex of the same accessor (split for normals or texture coordinates?); they are kept apart, which opens the surface there: export with merged vertices, or as OBJ, to measure it as one surface"
+            ),
+        ));
+    }
+}
+
+/// Weld border vertices of different spaces that coincide within [`WELD_RELATIVE`] × the
+/// bounding-box diagonal; the survivor is the vertex that came first. Vertex order is kept
+/// otherwise.
+fn weld_spaces(
+    positions: Vec<[f64; 3]>,
+    space: &[u32],
+    mut triangles: Vec<[u32; 3]>,
+    warnings: &mut Vec<Warning>,
+) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
+    let n = positions.len();
+    if space.iter().all(|&s| s == space[0]) {
+        return (positions, triangles);
+    }
+    // Border vertices: on an edge used by exactly one triangle of its own space (edges never
+    // cross spaces before welding).
+    let mut edge_use: HashMap<(u32, u32), u32> = HashMap::with_capacity(triangles.len() * 3 / 2);
+    for t in &triangles {
+        for i in 0..3 {
+            let (a, b) = (t[i], t[(i + 1) % 3]);
+            *edge_use.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+        }
+    }
+    let mut border = vec![false; n];
+    for (&(a, b), &k) in &edge_use {
+        if k == 1 {
+            border[a as usize] = true;
+            border[b as usize] = true;
+        }
+    }
+    let (lo, hi) = crate::mesh::bbox_of(positions.iter().copied());
+    let diag = ((hi[0] - lo[0]).powi(2) + (hi[1] - lo[1]).powi(2) + (hi[2] - lo[2]).powi(2)).sqrt();
+    let tol = WELD_RELATIVE * diag;
+    if tol <= 0.0 {
+        return (positions, triangles);
+    }
+    let cell = |p: [f64; 3]| -> [i64; 3] { p.map(|x| (x / tol).floor() as i64) };
+    let mut grid: HashMap<[i64; 3], Vec<u32>> = HashMap::new();
+    let mut target: Vec<u32> = (0..n as u32).collect();
+    let mut welded = 0usize;
+    for v in 0..n {
+        if !border[v] {
+            continue;
+        }
+        let p = positions[v];
+        let c = cell(p);
+        let mut found = None;
+        'search: for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    if let Some(list) = grid.get(&[c[0] + dx, c[1] + dy, c[2] + dz]) {
+                        for &w in list {
+                            let q = positions[w as usize];
+                            let d2 = (p[0] - q[0]).powi(2)
+                                + (p[1] - q[1]).powi(2)
+                                + (p[2] - q[2]).powi(2);
+                            if space[w as usize] != space[v] && d2 <= tol * tol {
+                                found = Some(w);
+                                break 'search;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        match found {
+            Some(w) => {
+                target[v] = w;
+                welded += 1;
+            }
+            None => grid.entry(c).or_default().push(v as u32),
+        }
+    }
+    if welded == 0 {
+        return (positions, triangles);
+    }
+    // Compact: survivors keep their relative order.
+    let mut new_index = vec![u32::MAX; n];
+    let mut kept = Vec::with_capacity(n - welded);
+    for v in 0..n {
+        if target[v] as usize == v {
+            new_index[v] = kept.len() as u32;
+            kept.push(positions[v]);
+        }
+    }
+    for t in &mut triangles {
+        for i in t.iter_mut() {
+            *i = new_index[target[*i as usize] as usize];
+        }
+    }
+    warnings.push(Warning::new(
+        "vertices_welded",
+        format!(
+            "{welded} border vertices of different primitives welded (tolerance {tol:.3e}, {WELD_RELATIVE:e} of the bounding-box diagonal)"
+        ),
+    ));
+    (kept, triangles)
+}
+
+/// Heat-map colour of ϖ: log scale from [`HEATMAP_MIN`] (blue) through cyan, green and yellow
+/// to [`HEATMAP_MAX`] (red).
+pub fn heat_color(varpi: f64) -> [f32; 3] {
+    let t = if varpi <= HEATMAP_MIN {
+        0.0
+    } else {
+        ((varpi / HEATMAP_MIN).log10() / (HEATMAP_MAX / HEATMAP_MIN).log10()).clamp(0.0, 1.0)
+    };
+    const STOPS: [[f64; 3]; 5] = [
+        [0.0, 0.0, 1.0],
+        [0.0, 1.0, 1.0],
+        [0.0, 1.0, 0.0],
+        [1.0, 1.0, 0.0],
+        [1.0, 0.0, 0.0],
+    ];
+    let x = t * 4.0;
+    let i = (x.floor() as usize).min(3);
+    let f = x - i as f64;
+    let (a, b) = (STOPS[i], STOPS[i + 1]);
+    [0, 1, 2].map(|k| (a[k] + (b[k] - a[k]) * f) as f32)
+}
+
+/// Build the glTF JSON and the binary buffer.
+fn build(mesh: &Mesh, flattenability: Option<&[f64]>) -> (serde_json::Value, Vec<u8>) {
+    use serde_json::json;
+    let n = mesh.num_vertices();
+    let conn = mesh.conn();
+    let mut bin: Vec<u8> = Vec::new();
+    let mut views = Vec::new();
+    let mut accessors = Vec::new();
+    // Every view starts 4-aligned; every accessor is 4-byte components.
+    let mut push_view = |bin: &mut Vec<u8>, data: &[u8], target: u32| -> usize {
+        while bin.len() % 4 != 0 {
+            bin.push(0);
+        }
+        views.push(json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": data.len(), "target": target}));
+        bin.extend_from_slice(data);
+        views.len() - 1
+    };
+    let f32_bytes = |vals: &mut dyn Iterator<Item = f32>| -> Vec<u8> {
+        vals.flat_map(f32::to_le_bytes).collect()
+    };
+
+    // POSITION, with min/max of the f32 values actually stored.
+    let pos32: Vec<[f32; 3]> = mesh
+        .positions()
+        .iter()
+        .map(|p| p.map(|x| x as f32))
+        .collect();
+    let mut min = [f32::INFINITY; 3];
+    let mut max = [f32::NEG_INFINITY; 3];
+    for p in &pos32 {
+        for k in 0..3 {
+            min[k] = min[k].min(p[k]);
+            max[k] = max[k].max(p[k]);
+        }
+    }
+    let v = push_view(
+        &mut bin,
+        &f32_bytes(&mut pos32.iter().flatten().copied()),
+        34962,
+    );
+    accessors.push(
+        json!({"bufferView": v, "componentType": 5126, "count": n, "type": "VEC3",
+        "min": min, "max": max}),
+    );
+    let position = accessors.len() - 1;
+
+    // NORMAL: angle-weighted vertex normals; unit length is required, so vertices without a
+    // normal (unreferenced) get +Z.
+    let normals: Vec<[f32; 3]> = geometry::vertex_normals(mesh)
+        .into_iter()
+        .map(|nrm| {
+            let l = (nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2]).sqrt();
+            if l.is_finite() && l > 0.5 {
+                let u = [nrm[0] / l, nrm[1] / l, nrm[2] / l].map(|x| x as f32);
+                // Renormalise in f32 so the stored vector is unit to f32 precision.
+                let l32 = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt();
+                u.map(|x| x / l32)
+            } else {
+                [0.0, 0.0, 1.0]
+            }
+        })
+        .collect();
+    let v = push_view(
+        &mut bin,
+        &f32_bytes(&mut normals.iter().flatten().copied()),
+        34962,
+    );
+    accessors.push(json!({"bufferView": v, "componentType": 5126, "count": n, "type": "VEC3"}));
+    let normal = accessors.len() - 1;
+
+    let mut attributes = json!({"POSITION": position, "NORMAL": normal});
+    if let Some(varpi) = flattenability {
+        let values: Vec<f32> = (0..n)
+            .map(|i| varpi.get(i).copied().unwrap_or(0.0))
+            .map(|x| if x.is_finite() { x as f32 } else { 0.0 })
+            .collect();
+        let v = push_view(&mut bin, &f32_bytes(&mut values.iter().copied()), 34962);
+        accessors
+            .push(json!({"bufferView": v, "componentType": 5126, "count": n, "type": "SCALAR"}));
+        attributes["_FLATTENABILITY"] = json!(accessors.len() - 1);
+        let colors: Vec<[f32; 3]> = (0..n)
+            .map(|i| {
+                if conn.is_interior(i as u32) {
+                    heat_color(varpi.get(i).copied().unwrap_or(0.0))
+                } else {
+                    NON_INTERIOR_COLOR
+                }
+            })
+            .collect();
+        let v = push_view(
+            &mut bin,
+            &f32_bytes(&mut colors.iter().flatten().copied()),
+            34962,
+        );
+        accessors.push(json!({"bufferView": v, "componentType": 5126, "count": n, "type": "VEC3"}));
+        attributes["COLOR_0"] = json!(accessors.len() - 1);
+    }
+
+    // One primitive per patch, all sharing the vertex accessors.
+    let mut by_patch: Vec<Vec<u32>> = vec![Vec::new(); mesh.num_patches()];
+    for (t, &p) in mesh.triangles().iter().zip(mesh.face_patch()) {
+        by_patch[p as usize].extend_from_slice(t);
+    }
+    let mut primitives = Vec::new();
+    for (p, idx) in by_patch.iter().enumerate() {
+        if idx.is_empty() {
+            continue;
+        }
+        let bytes: Vec<u8> = idx.iter().flat_map(|i| i.to_le_bytes()).collect();
+        let v = push_view(&mut bin, &bytes, 34963);
+        accessors.push(
+            json!({"bufferView": v, "componentType": 5125, "count": idx.len(), "type": "SCALAR"}),
+        );
+        primitives.push(
+            json!({"attributes": attributes.clone(), "indices": accessors.len() - 1,
+            "mode": 4, "extras": {"patch": mesh.patch_names()[p]}}),
+        );
+    }
+    while bin.len() % 4 != 0 {
+        bin.push(0);
+    }
+    let mut asset =
+        json!({"version": "2.0", "generator": concat!("flatmesh ", env!("CARGO_PKG_VERSION"))});
+    if flattenability.is_some() {
+        asset["extras"] = json!({"flatmesh": {
+            "attribute": "_FLATTENABILITY",
+            "quantity": "flattenability |2π − θ| at interior vertices, radians (0 elsewhere)",
+            "heatmap": {
+                "attribute": "COLOR_0",
+                "scale": "log10",
+                "min": HEATMAP_MIN,
+                "max": HEATMAP_MAX,
+                "colors": "blue at or below min (developable), cyan, green, yellow, red at or above max",
+                "non_interior": NON_INTERIOR_COLOR,
+            }
+        }});
+    }
+    let root = json!({
+        "asset": asset,
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0, "name": "flatmesh"}],
+        "meshes": [{"name": "flatmesh", "primitives": primitives}],
+        "accessors": accessors,
+        "bufferViews": views,
+        "buffers": [{"byteLength": bin.len()}],
+    });
+    (root, bin)
+}
+
+/// Binary glTF: POSITION, NORMAL, one indexed primitive per patch (patch name in the
+/// primitive's extras) and, when `flattenability` is given, `_FLATTENABILITY` and a COLOR_0
+/// heat map whose scale is stated in `asset.extras.flatmesh`.
+pub fn write_glb(mesh: &Mesh, flattenability: Option<&[f64]>) -> Vec<u8> {
+    let (root, bin) = build(mesh, flattenability);
+    let mut json = serde_json::to_vec(&root).unwrap_or_default();
+    while json.len() % 4 != 0 {
+        json.push(b' ');
+    }
+    let total = 12 + 8 + json.len() + 8 + bin.len();
+    let mut out = Vec::with_capacity(total);
+    out.extend_from_slice(b"glTF");
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&(total as u32).to_le_bytes());
+    out.extend_from_slice(&(json.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(&json);
+    out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"BIN\0");
+    out.extend_from_slice(&bin);
+    out
+}
+
+/// `.gltf` JSON with the buffer embedded as a base64 `data:` URI; same content as
+/// [`write_glb`].
+pub fn write_gltf(mesh: &Mesh, flattenability: Option<&[f64]>) -> Vec<u8> {
+    let (mut root, bin) = build(mesh, flattenability);
+    let uri = format!(
+        "data:application/octet-stream;base64,{}",
+        base64::engine::general_purpose::STANDARD.encode(&bin)
+    );
+    root["buffers"][0]["uri"] = serde_json::Value::String(uri);
+    serde_json::to_vec_pretty(&root).unwrap_or_default()
 }
