@@ -80,15 +80,15 @@ pub(crate) fn wedges(
         i = j;
     }
     let mut class = vec![u32::MAX; nh];
-    let mut root_class: HashMap<u32, u32> = HashMap::new();
+    let mut root_class = vec![u32::MAX; nh];
     let mut n = 0u32;
-    for c in 0..nh {
-        let r = find(&mut parent, c as u32);
-        let id = *root_class.entry(r).or_insert_with(|| {
+    for (c, cl) in class.iter_mut().enumerate() {
+        let r = find(&mut parent, c as u32) as usize;
+        if root_class[r] == u32::MAX {
+            root_class[r] = n;
             n += 1;
-            n - 1
-        });
-        class[c] = id;
+        }
+        *cl = root_class[r];
     }
     (class, n as usize, boundary)
 }

@@ -165,6 +165,17 @@ fn dense_solve(m: &Mat<f64>, rhs: &[f64]) -> Result<(Vec<f64>, bool), String> {
     Ok((x, true))
 }
 
+/// out −= Λᵀ c, Λ row-major with rows of length n.
+fn sub_lam_t(lam_mat: &[f64], n: usize, c: &[f64], out: &mut [f64]) {
+    for (row, &cj) in lam_mat.chunks_exact(n).zip(c) {
+        if cj != 0.0 {
+            for (o, x) in out.iter_mut().zip(row) {
+                *o -= x * cj;
+            }
+        }
+    }
+}
+
 /// Solve the LPFB problem (Eq. 9/10 by Eq. 11–14) and lay the boundary out (Eq. 6–7).
 pub fn solve(
     p: &Problem,
@@ -224,13 +235,10 @@ pub fn solve(
         }
         w.eval(p, &l, &theta, &ap_target);
         // B_θ = −∂J/∂θ = −(θ − a) − Λᵀλ ; B_λ = −g  (Appendix, Statements 1–2)
-        for i in 0..n {
-            let mut s = -(theta[i] - p.angles[i]);
-            for j in 0..r {
-                s -= w.lam_mat[j * n + i] * lambda[j];
-            }
-            b_theta[i] = s;
+        for ((b, t), a) in b_theta.iter_mut().zip(&theta).zip(&p.angles) {
+            *b = -(t - a);
         }
+        sub_lam_t(&w.lam_mat, n, &lambda, &mut b_theta);
         grad_norm = (b_theta.iter().map(|x| x * x).sum::<f64>()
             + w.g.iter().map(|x| x * x).sum::<f64>())
         .sqrt();
@@ -254,23 +262,19 @@ pub fn solve(
         }
         // Eq. 13: ΛΛᵀ δλ = Λ B_θ − B_λ
         let m = w.gram();
-        for j in 0..r {
-            let row = &w.lam_mat[j * n..(j + 1) * n];
-            rhs[j] = row.iter().zip(&b_theta).map(|(a, b)| a * b).sum::<f64>() + w.g[j];
+        for ((x, row), g) in rhs.iter_mut().zip(w.lam_mat.chunks_exact(n)).zip(&w.g) {
+            *x = row.iter().zip(&b_theta).map(|(a, b)| a * b).sum::<f64>() + g;
         }
         let (dl, used_svd) =
             dense_solve(&m, &rhs).map_err(|e| AlgoError::Input(format!("{stage}: {e}")))?;
         svd_steps += used_svd as usize;
         // Eq. 14: δθ = B_θ − Λᵀ δλ
-        for i in 0..n {
-            let mut s = b_theta[i];
-            for j in 0..r {
-                s -= w.lam_mat[j * n + i] * dl[j];
-            }
-            theta[i] += s;
+        sub_lam_t(&w.lam_mat, n, &dl, &mut b_theta);
+        for (t, d) in theta.iter_mut().zip(&b_theta) {
+            *t += d;
         }
-        for j in 0..r {
-            lambda[j] += dl[j];
+        for (l, d) in lambda.iter_mut().zip(&dl) {
+            *l += d;
         }
         iterations += 1;
     }
@@ -279,7 +283,7 @@ pub fn solve(
     for _ in 0..20 {
         w.eval(p, &l, &theta, &ap_target);
         let nr = w.g.iter().fold(0.0f64, |a, x| a.max(x.abs()));
-        if !(nr < resid) {
+        if nr.partial_cmp(&resid) != Some(std::cmp::Ordering::Less) {
             break;
         }
         resid = nr;
@@ -290,13 +294,7 @@ pub fn solve(
         let (dl, used_svd) =
             dense_solve(&m, &w.g).map_err(|e| AlgoError::Input(format!("{stage}: {e}")))?;
         svd_steps += used_svd as usize;
-        for i in 0..n {
-            let mut s = 0.0;
-            for j in 0..r {
-                s -= w.lam_mat[j * n + i] * dl[j];
-            }
-            theta[i] += s;
-        }
+        sub_lam_t(&w.lam_mat, n, &dl, &mut theta);
     }
     w.eval(p, &l, &theta, &ap_target);
     let constraint_residual = w.g.iter().fold(0.0f64, |a, x| a.max(x.abs()));

@@ -187,8 +187,7 @@ pub fn boundary_intersections(uv: &[[f64; 2]], loops: &[Vec<u32>], vertex_ids: &
     for s in 0..segs.len() {
         let (_, xmax, i, j) = segs[s];
         let (a, b) = (uv[i as usize], uv[j as usize]);
-        for t in s + 1..segs.len() {
-            let (xmin2, _, k, l) = segs[t];
+        for &(xmin2, _, k, l) in &segs[s + 1..] {
             if xmin2 > xmax {
                 break;
             }
