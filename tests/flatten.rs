@@ -879,3 +879,90 @@ fn cli_writes_patterns() {
     assert_eq!(bad.status.code(), Some(2));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A flat 3D grid mapped by the linear map diag(1.1, 0.9): σ1 = 1.1 and σ2 = 0.9 on every
+/// face, so stretch 10 %, compression 10 %, A(Ω) = (0.99 − 1) · 100 %, Sander
+/// L² = √((1/0.9² + 1/1.1²)/2), L∞ = 1/0.9.
+#[test]
+fn measures_of_a_known_linear_map() {
+    use flatten::measures;
+    let (pos, tris) = grid(
+        6,
+        5,
+        |i, j| [i as f64 * 0.2, j as f64 * 0.25, 0.0],
+        |_, _| true,
+    );
+    let mesh = mesh_of(pos.clone(), tris.clone());
+    let uv: Vec<[f64; 2]> = pos.iter().map(|p| [1.1 * p[0], 0.9 * p[1]]).collect();
+    let loops = mesh.conn().boundary_loops().to_vec();
+    let ids: Vec<u32> = (0..pos.len() as u32).collect();
+    let m = measures::compute(&pos, &uv, &tris, &loops, &ids);
+    let close = |a: f64, b: f64| (a - b).abs() < 1e-12 * b.abs().max(1.0);
+    assert!(
+        close(m.stretch_max_pct, 10.0) && close(m.stretch_mean_pct, 10.0),
+        "{m:?}"
+    );
+    assert!(close(m.compression_max_pct, 10.0) && close(m.compression_mean_pct, 10.0));
+    assert!(close(m.area_distortion_pct, -1.0));
+    assert!(close(
+        m.l2_stretch,
+        ((1.0 / 0.81 + 1.0 / 1.21) / 2.0f64).sqrt()
+    ));
+    assert!(close(m.linf_stretch, 1.0 / 0.9));
+    assert_eq!(
+        (m.flipped_triangles, m.boundary_intersections, m.overlap),
+        (0, 0, 0)
+    );
+    // Π_θ: corners of the rectangle keep π/2, other boundary angles stay π: 0
+    assert!(m.pi_theta < 1e-12);
+    // Π_L: mean |l − l0| over the boundary: horizontal edges +0.02, vertical −0.025
+    let (nh, nv) = (2 * 5, 2 * 4);
+    let want = (nh as f64 * 0.02 + nv as f64 * 0.025) / (nh + nv) as f64;
+    assert!(close(m.pi_l, want), "{} vs {want}", m.pi_l);
+}
+
+/// A helical strip (valid in 3D) laid flat as a planar annular strip of 1.25 turns: no
+/// triangle is flipped, but the boundary crosses itself, so S(Ω) = 1. Reflecting the strip
+/// flips every triangle.
+#[test]
+fn overlap_is_detected_from_boundary_crossings_and_flips() {
+    use flatten::measures;
+    let (nu, nv) = (80, 3);
+    let ang = |i: usize| 2.5 * PI * i as f64 / (nu - 1) as f64;
+    let rad = |j: usize| 1.2 - 0.1 * j as f64; // +angle then inward: counter-clockwise cells
+    let (pos, tris) = grid(
+        nu,
+        nv,
+        |i, j| [rad(j) * ang(i).cos(), rad(j) * ang(i).sin(), 0.3 * ang(i)],
+        |_, _| true,
+    );
+    let mesh = mesh_of(pos.clone(), tris.clone());
+    let uv: Vec<[f64; 2]> = pos.iter().map(|p| [p[0], p[1]]).collect();
+    let loops = mesh.conn().boundary_loops().to_vec();
+    let ids: Vec<u32> = (0..pos.len() as u32).collect();
+    let m = measures::compute(&pos, &uv, &tris, &loops, &ids);
+    assert_eq!(m.flipped_triangles, 0);
+    assert!(m.boundary_intersections > 0);
+    assert_eq!(m.overlap, 1);
+    let mirrored: Vec<[f64; 2]> = uv.iter().map(|q| [q[0], -q[1]]).collect();
+    let m2 = measures::compute(&pos, &mirrored, &tris, &loops, &ids);
+    assert_eq!(m2.flipped_triangles, tris.len());
+    assert_eq!(m2.overlap, 1);
+}
+
+#[test]
+fn exact_orientation_decides_near_collinear_points() {
+    use flatten::measures::orient2d;
+    // points on the line y = x at large offsets, nudged by one ulp: f64 arithmetic would
+    // round the determinant to zero or to the wrong sign
+    let a = [0.5, 0.5];
+    let b = [12.0, 12.0];
+    for k in 0..200 {
+        let x = 24.0 + k as f64;
+        let up = [x, f64::from_bits(x.to_bits() + 1)];
+        let down = [x, f64::from_bits(x.to_bits() - 1)];
+        assert_eq!(orient2d(a, b, up), 1);
+        assert_eq!(orient2d(a, b, down), -1);
+        assert_eq!(orient2d(a, b, [x, x]), 0);
+    }
+}

@@ -316,3 +316,105 @@ pub fn solve(
         constraint_residual,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Λ (Appendix, Statement 3) against central finite differences of g.
+    #[test]
+    fn jacobian_matches_finite_differences() {
+        let n = 11;
+        let p = Problem {
+            lengths: (0..n)
+                .map(|k| 1.0 + 0.3 * ((k * 7) % 5) as f64 / 5.0)
+                .collect(),
+            angles: vec![0.0; n],
+            pairs: vec![(2, 7), (4, 11)],
+            antiparallel: vec![(1, 8), (3, 6)],
+        };
+        let r = 3 + 2 * p.pairs.len() + p.antiparallel.len();
+        let mk = || Work {
+            n,
+            r,
+            lam_mat: vec![0.0; r * n],
+            g: vec![0.0; r],
+            phi: vec![0.0; n],
+            ex: vec![0.0; n],
+            ey: vec![0.0; n],
+        };
+        let theta: Vec<f64> = (0..n).map(|k| 2.4 + 0.1 * (k as f64).sin()).collect();
+        let target = vec![PI; p.antiparallel.len()];
+        let mut w = mk();
+        w.eval(&p, &p.lengths, &theta, &target);
+        let h = 1e-6;
+        for i in 0..n {
+            let (mut a, mut b) = (mk(), mk());
+            let mut tp = theta.clone();
+            tp[i] += h;
+            a.eval(&p, &p.lengths, &tp, &target);
+            tp[i] -= 2.0 * h;
+            b.eval(&p, &p.lengths, &tp, &target);
+            for j in 0..r {
+                let fd = (a.g[j] - b.g[j]) / (2.0 * h);
+                let an = w.lam_mat[j * n + i];
+                assert!((fd - an).abs() < 1e-7, "row {j} col {i}: fd {fd} vs Λ {an}");
+            }
+        }
+    }
+
+    /// A redundant constraint (the closure pair repeated) makes ΛΛᵀ singular: the SVD path
+    /// must be taken and give the same boundary as the full-rank problem.
+    #[test]
+    fn rank_deficient_system_uses_the_svd() {
+        let n = 16;
+        let p = Problem {
+            lengths: (0..n)
+                .map(|k| 1.0 + 0.5 * (k as f64 * 0.7).sin().abs())
+                .collect(),
+            angles: (0..n)
+                .map(|k| PI - 2.0 * PI / n as f64 + 0.05 * (k as f64).cos())
+                .collect(),
+            pairs: vec![],
+            antiparallel: vec![],
+        };
+        let c = crate::algorithms::Silent::default();
+        let full = solve(&p, 100, 1e-10, &c, "t").unwrap();
+        let mut q = p.clone();
+        q.pairs = vec![(0, n)];
+        let red = solve(&q, 100, 1e-10, &c, "t").unwrap();
+        assert!(full.converged && red.converged);
+        assert_eq!(full.svd_steps, 0);
+        assert!(red.svd_steps > 0);
+        for (a, b) in full.theta.iter().zip(&red.theta) {
+            assert!((a - b).abs() < 1e-9, "{a} vs {b}");
+        }
+    }
+
+    /// Equal lengths and equal surface angles: by symmetry the optimum is the regular polygon,
+    /// θ_i = (n − 2)π / n, whatever a is.
+    #[test]
+    fn regular_polygon_is_the_optimum_for_equal_data() {
+        let n = 24;
+        let p = Problem {
+            lengths: vec![0.3; n],
+            angles: vec![3.0; n],
+            pairs: vec![],
+            antiparallel: vec![],
+        };
+        let s = solve(&p, 100, 1e-12, &crate::algorithms::Silent::default(), "t").unwrap();
+        let want = (n as f64 - 2.0) * PI / n as f64;
+        for t in &s.theta {
+            assert!((t - want).abs() < 1e-12, "{t} vs {want}");
+        }
+        // circumradius of the regular 24-gon with side 0.3
+        let rad = 0.3 / (2.0 * (PI / n as f64).sin());
+        let c = s.positions.iter().fold([0.0, 0.0], |a, q| {
+            [a[0] + q[0] / n as f64, a[1] + q[1] / n as f64]
+        });
+        for q in &s.positions {
+            let d = ((q[0] - c[0]).powi(2) + (q[1] - c[1]).powi(2)).sqrt();
+            assert!((d - rad).abs() < 1e-12);
+        }
+    }
+}
