@@ -57,6 +57,32 @@ pub struct Solution {
     pub constraint_residual: f64,
 }
 
+/// Neumaier's compensated sum: the running sums of Eq. 6–7 run over the whole loop, and plain
+/// summation lets rounding random-walk to ~n^1.5 ε, which would cap how well the loop closes
+/// for boundaries of thousands of edges.
+#[derive(Default, Clone, Copy)]
+struct Acc {
+    s: f64,
+    c: f64,
+}
+
+impl Acc {
+    #[inline]
+    fn add(&mut self, x: f64) {
+        let t = self.s + x;
+        if self.s.abs() >= x.abs() {
+            self.c += (self.s - t) + x;
+        } else {
+            self.c += (x - t) + self.s;
+        }
+        self.s = t;
+    }
+    #[inline]
+    fn value(&self) -> f64 {
+        self.s + self.c
+    }
+}
+
 struct Work {
     n: usize,
     r: usize,
@@ -69,36 +95,37 @@ struct Work {
 
 impl Work {
     /// Evaluate φ (Eq. 7), the constraints g and their Jacobian Λ (Appendix, Statement 3).
-    fn eval(&mut self, p: &Problem, l: &[f64], theta: &[f64], ap_target: &[f64]) {
+    /// `tau` holds the turning angles τ_i = π − θ_i.
+    fn eval(&mut self, p: &Problem, l: &[f64], tau: &[f64], ap_target: &[f64]) {
         let n = self.n;
         // φ_k (0-based) = (k+1)π − Σ_{b ≤ k} θ_b, summed as turning angles Σ (π − θ_b) so
         // that no term is large: (k+1)π − Σθ would cancel ~nπ and lose ~n·1e-16 rad.
-        let mut s = 0.0;
+        let mut s = Acc::default();
         for k in 0..n {
-            s += PI - theta[k];
-            self.phi[k] = s;
+            s.add(tau[k]);
+            self.phi[k] = s.value();
             self.ex[k] = l[k] * self.phi[k].cos();
             self.ey[k] = l[k] * self.phi[k].sin();
         }
         // row 0: closed-path theorem, (n − 2)π − Σθ = Σ(π − θ) − 2π = 0
-        self.g[0] = s - 2.0 * PI;
+        self.g[0] = s.value() - 2.0 * PI;
         self.lam_mat[..n].iter_mut().for_each(|x| *x = -1.0);
         let mut row = 1;
         let ranges = std::iter::once((0usize, n)).chain(p.pairs.iter().copied());
         for (a, b) in ranges {
             let (rx, ry) = (row, row + 1);
-            let (mut sx, mut sy) = (0.0, 0.0);
+            let (mut sx, mut sy) = (Acc::default(), Acc::default());
             // suffix sums over k ∈ [a, b), k ≥ i: ∂(l cos φ_k)/∂θ_i = l sin φ_k for i ≤ k
             for i in (0..n).rev() {
                 if i >= a && i < b {
-                    sx += self.ex[i];
-                    sy += self.ey[i];
+                    sx.add(self.ex[i]);
+                    sy.add(self.ey[i]);
                 }
-                self.lam_mat[rx * n + i] = sy;
-                self.lam_mat[ry * n + i] = -sx;
+                self.lam_mat[rx * n + i] = sy.value();
+                self.lam_mat[ry * n + i] = -sx.value();
             }
-            self.g[rx] = sx;
-            self.g[ry] = sy;
+            self.g[rx] = sx.value();
+            self.g[ry] = sy.value();
             row += 2;
         }
         for (j, &(a, b)) in p.antiparallel.iter().enumerate() {
@@ -207,15 +234,19 @@ pub fn solve(
         ex: vec![0.0; n],
         ey: vec![0.0; n],
     };
-    let mut theta = p.angles.clone();
+    // The unknowns are stored as turning angles τ_i = π − θ_i: near a smooth boundary τ is
+    // small, so its unit in the last place is far below θ's (≈ 4e-16), and the last Newton
+    // corrections (~1e-17 per angle on a loop of a thousand edges) are not rounded away.
+    let tau0: Vec<f64> = p.angles.iter().map(|a| PI - a).collect();
+    let mut tau = tau0.clone();
     // k of each antiparallel pair from θ = a, where the 3D surface fixes it (Sec. 3.2).
     let mut ap_target = vec![0.0; p.antiparallel.len()];
     {
         let mut phi = vec![0.0; n];
-        let mut s = 0.0;
+        let mut s = Acc::default();
         for k in 0..n {
-            s += PI - theta[k];
-            phi[k] = s;
+            s.add(tau[k]);
+            phi[k] = s.value();
         }
         for (j, &(a, b)) in p.antiparallel.iter().enumerate() {
             let d = phi[b] - phi[a] - PI;
@@ -233,10 +264,11 @@ pub fn solve(
         if control.cancelled() {
             return Err(AlgoError::Cancelled);
         }
-        w.eval(p, &l, &theta, &ap_target);
+        w.eval(p, &l, &tau, &ap_target);
         // B_θ = −∂J/∂θ = −(θ − a) − Λᵀλ ; B_λ = −g  (Appendix, Statements 1–2)
-        for ((b, t), a) in b_theta.iter_mut().zip(&theta).zip(&p.angles) {
-            *b = -(t - a);
+        // θ − a = (π − τ) − (π − τ0) = τ0 − τ
+        for ((b, t), t0) in b_theta.iter_mut().zip(&tau).zip(&tau0) {
+            *b = t - t0;
         }
         sub_lam_t(&w.lam_mat, n, &lambda, &mut b_theta);
         grad_norm = (b_theta.iter().map(|x| x * x).sum::<f64>()
@@ -270,8 +302,8 @@ pub fn solve(
         svd_steps += used_svd as usize;
         // Eq. 14: δθ = B_θ − Λᵀ δλ
         sub_lam_t(&w.lam_mat, n, &dl, &mut b_theta);
-        for (t, d) in theta.iter_mut().zip(&b_theta) {
-            *t += d;
+        for (t, d) in tau.iter_mut().zip(&b_theta) {
+            *t -= d; // θ += δθ
         }
         for (l, d) in lambda.iter_mut().zip(&dl) {
             *l += d;
@@ -281,7 +313,7 @@ pub fn solve(
     // Close the loop to rounding error: Gauss–Newton on g alone.
     let mut resid = f64::INFINITY;
     for _ in 0..20 {
-        w.eval(p, &l, &theta, &ap_target);
+        w.eval(p, &l, &tau, &ap_target);
         let nr = w.g.iter().fold(0.0f64, |a, x| a.max(x.abs()));
         if nr.partial_cmp(&resid) != Some(std::cmp::Ordering::Less) {
             break;
@@ -294,20 +326,25 @@ pub fn solve(
         let (dl, used_svd) =
             dense_solve(&m, &w.g).map_err(|e| AlgoError::Input(format!("{stage}: {e}")))?;
         svd_steps += used_svd as usize;
-        sub_lam_t(&w.lam_mat, n, &dl, &mut theta);
+        // θ −= Λᵀ dl, i.e. τ += Λᵀ dl
+        for (row, &c) in w.lam_mat.chunks_exact(n).zip(&dl) {
+            for (t, x) in tau.iter_mut().zip(row) {
+                *t += x * c;
+            }
+        }
     }
-    w.eval(p, &l, &theta, &ap_target);
+    w.eval(p, &l, &tau, &ap_target);
     let constraint_residual = w.g.iter().fold(0.0f64, |a, x| a.max(x.abs()));
     // Eq. 6: positions with the true (unnormalised) lengths
     let mut positions = Vec::with_capacity(n);
-    let (mut x, mut y) = (0.0, 0.0);
+    let (mut x, mut y) = (Acc::default(), Acc::default());
     for k in 0..n {
-        positions.push([x, y]);
-        x += p.lengths[k] * w.phi[k].cos();
-        y += p.lengths[k] * w.phi[k].sin();
+        positions.push([x.value(), y.value()]);
+        x.add(p.lengths[k] * w.phi[k].cos());
+        y.add(p.lengths[k] * w.phi[k].sin());
     }
     Ok(Solution {
-        theta,
+        theta: tau.iter().map(|t| PI - t).collect(),
         positions,
         iterations,
         converged,
@@ -346,14 +383,15 @@ mod tests {
         let theta: Vec<f64> = (0..n).map(|k| 2.4 + 0.1 * (k as f64).sin()).collect();
         let target = vec![PI; p.antiparallel.len()];
         let mut w = mk();
-        w.eval(&p, &p.lengths, &theta, &target);
+        let tau: Vec<f64> = theta.iter().map(|t| PI - t).collect();
+        w.eval(&p, &p.lengths, &tau, &target);
         let h = 1e-6;
         for i in 0..n {
             let (mut a, mut b) = (mk(), mk());
-            let mut tp = theta.clone();
-            tp[i] += h;
+            let mut tp = tau.clone();
+            tp[i] -= h; // θ_i + h
             a.eval(&p, &p.lengths, &tp, &target);
-            tp[i] -= 2.0 * h;
+            tp[i] += 2.0 * h; // θ_i − h
             b.eval(&p, &p.lengths, &tp, &target);
             for j in 0..r {
                 let fd = (a.g[j] - b.g[j]) / (2.0 * h);
