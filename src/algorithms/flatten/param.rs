@@ -6,10 +6,10 @@
 //! definite for any triangulation, obtuse angles included. It is factored once by sparse
 //! Cholesky and both coordinates are solved with that one factor.
 
-use faer::linalg::solvers::Solve;
-use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
+use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
+use faer::sparse::linalg::cholesky::factorize_symbolic_cholesky;
 use faer::sparse::{SparseColMat, Triplet};
-use faer::{Mat, Side};
+use faer::{Conj, Mat, Par, Side};
 
 /// ½ cot of each corner angle of each triangle (the weight of the opposite edge).
 pub fn half_cots(pos: &[[f64; 3]], tris: &[[u32; 3]]) -> Vec<[f64; 3]> {
@@ -37,14 +37,47 @@ pub fn half_cots(pos: &[[f64; 3]], tris: &[[u32; 3]]) -> Vec<[f64; 3]> {
         .collect()
 }
 
-fn factor(n: usize, trip: &[Triplet<usize, usize, f64>]) -> Result<Llt<usize, f64>, String> {
+/// Solve A X = rhs in place for a symmetric positive-definite A given by its lower triangle
+/// (duplicates summed): one symbolic and one numeric Cholesky, every column of `rhs` solved
+/// with that one factor. Sequential: pieces already run in parallel, and on two cores faer's
+/// own threads were no faster (../shared/CRATES.md); its high-level solve, run from inside a
+/// rayon task, took longer than the factorisation.
+fn spd_solve(
+    n: usize,
+    trip: &[Triplet<usize, usize, f64>],
+    rhs: &mut Mat<f64>,
+) -> Result<(), String> {
     let a = SparseColMat::<usize, f64>::try_new_from_triplets(n, n, trip)
         .map_err(|e| format!("sparse assembly failed: {e:?}"))?;
-    let sym = SymbolicLlt::try_new(a.symbolic(), Side::Lower)
-        .map_err(|e| format!("symbolic Cholesky failed: {e:?}"))?;
-    Llt::try_new_with_symbolic(sym, a.as_ref(), Side::Lower).map_err(|e| {
-        format!("Cholesky failed ({e:?}): the cotangent system is not positive definite")
-    })
+    let sym = factorize_symbolic_cholesky(
+        a.symbolic(),
+        Side::Lower,
+        Default::default(),
+        Default::default(),
+    )
+    .map_err(|e| format!("symbolic Cholesky failed: {e:?}"))?;
+    let par = Par::Seq;
+    let mut buf = MemBuffer::try_new(StackReq::any_of(&[
+        sym.factorize_numeric_llt_scratch::<f64>(par, Default::default()),
+        sym.solve_in_place_scratch::<f64>(rhs.ncols(), par),
+    ]))
+    .map_err(|e| format!("out of memory for the Cholesky factor: {e:?}"))?;
+    let mut values = vec![0.0f64; sym.len_val()];
+    let llt = sym
+        .factorize_numeric_llt(
+            &mut values,
+            a.as_ref(),
+            Side::Lower,
+            Default::default(),
+            par,
+            MemStack::new(&mut buf),
+            Default::default(),
+        )
+        .map_err(|e| {
+            format!("Cholesky failed ({e:?}): the cotangent system is not positive definite")
+        })?;
+    llt.solve_in_place_with_conj(Conj::No, rhs.as_mut(), par, MemStack::new(&mut buf));
+    Ok(())
 }
 
 /// Eq. 15–18: planar positions of all vertices, the `fixed` ones kept where they are and the
@@ -68,31 +101,34 @@ pub fn harmonic_fill(
         return Ok(uv);
     }
     let w = half_cots(pos, tris);
-    let mut trip = Vec::with_capacity(tris.len() * 9);
+    // lower triangle only (the factorisation reads Side::Lower); the diagonal is summed here
+    // so the triplet list holds about one entry per edge and face
+    let mut trip = Vec::with_capacity(tris.len() * 3 + nf);
+    let mut diag = vec![0.0; nf];
     let mut rhs = Mat::<f64>::zeros(nf, 2);
     for (t, wt) in tris.iter().zip(&w) {
         for i in 0..3 {
             let (a, b) = (t[(i + 1) % 3] as usize, t[(i + 2) % 3] as usize);
             let wij = wt[i];
-            for (p, q) in [(a, b), (b, a)] {
-                let fp = free_id[p];
+            let (fa, fb) = (free_id[a], free_id[b]);
+            for (fp, q) in [(fa, b), (fb, a)] {
                 if fp == usize::MAX {
                     continue;
                 }
-                trip.push(Triplet::new(fp, fp, wij));
-                let fq = free_id[q];
-                if fq == usize::MAX {
+                diag[fp] += wij;
+                if free_id[q] == usize::MAX {
                     let u = fixed[q].unwrap_or([0.0, 0.0]);
                     rhs[(fp, 0)] += wij * u[0];
                     rhs[(fp, 1)] += wij * u[1];
-                } else {
-                    trip.push(Triplet::new(fp, fq, -wij));
                 }
+            }
+            if fa != usize::MAX && fb != usize::MAX {
+                trip.push(Triplet::new(fa.max(fb), fa.min(fb), -wij));
             }
         }
     }
-    let llt = factor(nf, &trip)?;
-    llt.solve_in_place(rhs.as_mut());
+    trip.extend(diag.iter().enumerate().map(|(i, &d)| Triplet::new(i, i, d)));
+    spd_solve(nf, &trip, &mut rhs)?;
     for v in 0..nv {
         let f = free_id[v];
         if f != usize::MAX {
@@ -157,7 +193,9 @@ pub fn lscm(
         }
         match pinned[j] {
             Some(x) => rhs[(fi, 0)] -= val * x,
-            None => trip.push(Triplet::new(fi, fid[j], val)),
+            // lower triangle only: the factorisation reads Side::Lower
+            None if fid[j] <= fi => trip.push(Triplet::new(fi, fid[j], val)),
+            None => {}
         }
     };
     let w = half_cots(pos, tris);
@@ -183,8 +221,7 @@ pub fn lscm(
             add(2 * i + 1, 2 * j, 0.5, &mut trip);
         }
     }
-    let llt = factor(nf, &trip)?;
-    llt.solve_in_place(rhs.as_mut());
+    spd_solve(nf, &trip, &mut rhs)?;
     let val = |i: usize| pinned[i].unwrap_or_else(|| rhs[(fid[i], 0)]);
     let uv: Vec<[f64; 2]> = (0..nv).map(|v| [val(2 * v), val(2 * v + 1)]).collect();
     if uv.iter().any(|p| !p[0].is_finite() || !p[1].is_finite()) {
