@@ -966,3 +966,59 @@ fn exact_orientation_decides_near_collinear_points() {
         assert_eq!(orient2d(a, b, [x, x]), 0);
     }
 }
+
+/// LSCM is exact on a developable patch (a conformal map with the pins at their true
+/// distance is the isometry), so the baseline is checked against the same closed-form
+/// unrolling as LPFB.
+#[test]
+fn lscm_is_exact_on_developable_strips() {
+    let (mesh, truth) = cylinder(30, 20, 2.0, |_, _| true);
+    let (mesh2, truth2) = cone(30, 20);
+    for (m, t, label) in [(&mesh, &truth, "cylinder"), (&mesh2, &truth2, "cone")] {
+        let pat = flatten_mesh(m, Method::Lscm);
+        let piece = &pat.pieces[0];
+        let want: Vec<[f64; 2]> = piece.vertex_ids.iter().map(|&v| t[v as usize]).collect();
+        let err = rigid_fit_max_error(&piece.uv, &want) / diameter2(&want);
+        println!("LSCM {label}: max error / diameter {err:.3e}");
+        assert!(err <= 1e-6, "{label}: {err}");
+        assert_eq!(piece.measures["flipped_triangles"], 0);
+    }
+}
+
+#[test]
+fn svg_triangles_and_components_as_pieces() {
+    // two disjoint strips in one patch: two pieces, named after the patch with #1, #2
+    let (p1, t1) = grid(5, 4, |i, j| [i as f64, j as f64, 0.0], |_, _| true);
+    let (p2, t2) = grid(
+        4,
+        3,
+        |i, j| [10.0 + i as f64, j as f64, 0.5 * i as f64],
+        |_, _| true,
+    );
+    let off = p1.len() as u32;
+    let mut pos = p1;
+    pos.extend(p2);
+    let mut tris = t1;
+    tris.extend(t2.iter().map(|t| t.map(|v| v + off)));
+    let mesh = mesh_of(pos, tris);
+    let mut params = Params {
+        svg_triangles: true,
+        ..Params::default()
+    };
+    params.unit = flatten::Unit::Cm;
+    params.input_unit = flatten::Unit::Mm;
+    let pat = flatten::run(&mesh, &params, &Silent::default())
+        .unwrap()
+        .patterns
+        .unwrap();
+    let names: Vec<&str> = pat.pieces.iter().map(|p| p.patch.as_str()).collect();
+    assert_eq!(names, ["p#1", "p#2"]);
+    assert_eq!(flatmesh::io::pattern::scale(&pat), 0.1);
+    let svg = flatmesh::io::pattern::to_svg(&pat);
+    let n_tri: usize = pat.pieces.iter().map(|p| p.triangles.len()).sum();
+    assert_eq!(
+        svg.matches('Z').count(),
+        n_tri + 2,
+        "one Z per triangle and per outline"
+    );
+}

@@ -144,9 +144,12 @@ pub fn harmonic_fill(
 /// Least-squares conformal map with a free boundary (Lévy et al. 2002), written as the
 /// conformal energy E_C = E_D − A (Dirichlet energy minus the signed area of the image,
 /// Desbrun et al. 2002 show the equivalence). Two vertices of the outer loop, the farthest
-/// apart found by two sweeps, are pinned at their true 3D distance along the x axis; no other
-/// rescaling, so that a developable piece comes out isometric and the area distortion of LSCM
-/// is the one its pinning gives.
+/// apart found by two sweeps, are pinned on the x axis. LSCM is defined up to a similarity
+/// and the pins fix it, but their distance in the plane is not known beforehand (the 3D
+/// chord is shorter than the developed distance on a curved patch), so the result is then
+/// scaled uniformly about the first pin until its total boundary length equals the 3D one:
+/// the scale a pattern maker would choose, exact on a developable piece, and it leaves A(Ω)
+/// meaningful for comparison with LPFB.
 pub fn lscm(
     pos: &[[f64; 3]],
     tris: &[[u32; 3]],
@@ -223,7 +226,23 @@ pub fn lscm(
     }
     spd_solve(nf, &trip, &mut rhs)?;
     let val = |i: usize| pinned[i].unwrap_or_else(|| rhs[(fid[i], 0)]);
-    let uv: Vec<[f64; 2]> = (0..nv).map(|v| [val(2 * v), val(2 * v + 1)]).collect();
+    let mut uv: Vec<[f64; 2]> = (0..nv).map(|v| [val(2 * v), val(2 * v + 1)]).collect();
+    let (mut per2, mut per3) = (0.0, 0.0);
+    for lp in loops {
+        for k in 0..lp.len() {
+            let (i, j) = (lp[k] as usize, lp[(k + 1) % lp.len()] as usize);
+            per3 += super::cut::dist(pos[i], pos[j]);
+            per2 += ((uv[i][0] - uv[j][0]).powi(2) + (uv[i][1] - uv[j][1]).powi(2)).sqrt();
+        }
+    }
+    if !(per2 > 0.0 && per2.is_finite()) {
+        return Err("LSCM collapsed the boundary to a point".into());
+    }
+    let k = per3 / per2;
+    for q in &mut uv {
+        q[0] *= k;
+        q[1] *= k;
+    }
     if uv.iter().any(|p| !p[0].is_finite() || !p[1].is_finite()) {
         return Err("LSCM produced a non-finite position".into());
     }
