@@ -66,15 +66,13 @@ pub(crate) fn wedges(
         if j - i == 2 && !is_cut(he[i].0, he[i].1) {
             let (c, d) = (he[i].2 as usize, he[i + 1].2 as usize);
             let (fc, fd) = (c / 3, d / 3);
-            let (a0, b0) = (tris[fc][c % 3], tris[fc][(c % 3 + 1) % 3]);
-            let a1 = tris[fd][d % 3];
-            if a0 != a1 {
-                // c runs a0 → b0 and d runs b0 → a0: join the corners at a0 and at b0.
+            // c runs a → b; d must run b → a (consistent orientation): then the corner of c
+            // at a meets the corner after d, and the corner after c meets d's, at b.
+            if tris[fc][c % 3] != tris[fd][d % 3] {
                 union(&mut parent, c as u32, next(d) as u32);
                 union(&mut parent, next(c) as u32, d as u32);
                 boundary[c] = false;
                 boundary[d] = false;
-                let _ = b0;
             }
         }
         i = j;
