@@ -604,6 +604,15 @@ fn hemisphere_has_no_flip_and_no_overlap_lpfb_beside_lscm() {
         }
         mesh_of(pos, tris)
     })];
+    let fixture = Path::new("fixtures/hemisphere_cap.obj");
+    if fixture.exists() {
+        meshes.push((
+            "fixture hemisphere_cap".into(),
+            flatmesh::io::load_path(fixture).unwrap().0,
+        ));
+    } else {
+        println!("skipping fixture hemisphere_cap: not present yet");
+    }
     if let Some(m) = shared("paper/bff_hemisphere.obj") {
         meshes.push(("bff_hemisphere".into(), m));
     }
@@ -1082,4 +1091,146 @@ fn random_patches_keep_boundary_lengths() {
             );
         }
     }
+}
+
+/// An independent flattening of a developable piece, for truths on meshes with no closed
+/// form: lay the triangles out one by one (breadth first across edges) from their 3D edge
+/// lengths, each new vertex on the left of its triangle's oriented edge. No optimisation, no
+/// linear solve; exact when every interior angle sum is 2π.
+fn unfold(mesh: &Mesh, piece: &Piece) -> Vec<[f64; 2]> {
+    use std::collections::{HashMap, VecDeque};
+    let p3 = |v: u32| mesh.position(piece.vertex_ids[v as usize]);
+    let d = |a: u32, b: u32| {
+        let (x, y) = (p3(a), p3(b));
+        ((x[0] - y[0]).powi(2) + (x[1] - y[1]).powi(2) + (x[2] - y[2]).powi(2)).sqrt()
+    };
+    let mut edge_tris: HashMap<(u32, u32), Vec<usize>> = HashMap::new();
+    for (f, t) in piece.triangles.iter().enumerate() {
+        for i in 0..3 {
+            let (a, b) = (t[i], t[(i + 1) % 3]);
+            edge_tris.entry((a.min(b), a.max(b))).or_default().push(f);
+        }
+    }
+    let mut uv: Vec<Option<[f64; 2]>> = vec![None; piece.uv.len()];
+    let t0 = piece.triangles[0];
+    uv[t0[0] as usize] = Some([0.0, 0.0]);
+    uv[t0[1] as usize] = Some([d(t0[0], t0[1]), 0.0]);
+    let place = |uv: &mut Vec<Option<[f64; 2]>>, p: u32, q: u32, c: u32| {
+        let (pp, qq) = (uv[p as usize].unwrap(), uv[q as usize].unwrap());
+        let l = ((qq[0] - pp[0]).powi(2) + (qq[1] - pp[1]).powi(2)).sqrt();
+        let u = [(qq[0] - pp[0]) / l, (qq[1] - pp[1]) / l];
+        let (a, b) = (d(p, c), d(q, c));
+        let x = (l * l + a * a - b * b) / (2.0 * l);
+        let h = (a * a - x * x).max(0.0).sqrt();
+        uv[c as usize] = Some([pp[0] + x * u[0] - h * u[1], pp[1] + x * u[1] + h * u[0]]);
+    };
+    place(&mut uv, t0[0], t0[1], t0[2]);
+    let mut done = vec![false; piece.triangles.len()];
+    done[0] = true;
+    let mut queue = VecDeque::from([0usize]);
+    while let Some(f) = queue.pop_front() {
+        let t = piece.triangles[f];
+        for i in 0..3 {
+            let (a, b) = (t[i], t[(i + 1) % 3]);
+            for &g in &edge_tris[&(a.min(b), a.max(b))] {
+                if done[g] {
+                    continue;
+                }
+                done[g] = true;
+                let s = piece.triangles[g];
+                let k = (0..3).find(|&k| s[k] == b).unwrap();
+                // in g the edge runs b → a; its third vertex is on the left of b → a
+                let c = s[(k + 2) % 3];
+                if uv[c as usize].is_none() {
+                    place(&mut uv, b, a, c);
+                }
+                queue.push_back(g);
+            }
+        }
+    }
+    uv.into_iter()
+        .map(|q| q.expect("connected piece"))
+        .collect()
+}
+
+#[test]
+fn unfolding_agrees_with_the_closed_forms() {
+    // the independent unfolding itself against the analytic truths
+    let (mesh, truth) = cone(30, 20);
+    let pat = flatten_mesh(&mesh, Method::Lpfb);
+    let piece = &pat.pieces[0];
+    let un = unfold(&mesh, piece);
+    let want: Vec<[f64; 2]> = piece
+        .vertex_ids
+        .iter()
+        .map(|&v| truth[v as usize])
+        .collect();
+    assert!(rigid_fit_max_error(&un, &want) / diameter2(&want) < 1e-9);
+}
+
+/// The committed fixtures (fixtures/<name>.obj, written by the fixtures module): the
+/// developable ones against the triangle-by-triangle unfolding, all with exact boundary
+/// lengths. Skips with a message while the fixtures are not in the tree.
+#[test]
+fn fixtures_flatten_exactly() {
+    let dir = Path::new("fixtures");
+    let mut seen = 0;
+    for name in [
+        "flat_disk",
+        "cylinder",
+        "cone",
+        "two_holes",
+        "tube_two_panels",
+        "cube_cuts",
+    ] {
+        let path = dir.join(format!("{name}.obj"));
+        if !path.exists() {
+            println!("skipping fixture {name}: not present yet");
+            continue;
+        }
+        seen += 1;
+        let mesh = flatmesh::io::load_path(&path).expect("fixture loads").0;
+        let out = flatten::run(&mesh, &Params::default(), &Silent::default()).expect(name);
+        let pat = out.patterns.unwrap();
+        for (k, piece) in pat.pieces.iter().enumerate() {
+            let bl = boundary_rel_error(&mesh, piece);
+            for lp in &piece.boundary_loops {
+                let (l2, l3) = (loop_len_2d(piece, lp), loop_len_3d(&mesh, piece, lp));
+                assert!((l2 - l3).abs() / l3 <= 1e-9, "{name}: loop {l2} vs {l3}");
+            }
+            let coincide = out.summary["pieces"][k]["solver"]["cut_coincidence"]
+                .as_f64()
+                .unwrap();
+            let un = unfold(&mesh, piece);
+            let err = rigid_fit_max_error(&piece.uv, &un) / diameter2(&un);
+            println!(
+                "fixture {name} piece {}: loops {}, boundary {bl:.3e}, cut coincidence {coincide:.3e}, vs unfolding {err:.3e}",
+                piece.patch,
+                piece.boundary_loops.len()
+            );
+            assert!(bl <= 1e-9 && coincide <= 1e-9, "{name}");
+            // exactly developable pieces (the unfolding closes up) must match it
+            if piece.boundary_loops.len() == 1 && unfolding_is_consistent(&mesh, piece, &un) {
+                assert!(err <= 1e-6, "{name}: {err}");
+            }
+        }
+    }
+    println!("{seen} fixtures checked");
+}
+
+/// Whether the unfolding reproduces every 3D edge length (it does when the piece is
+/// developable; otherwise the BFS tree leaves some edges wrong and it is no truth).
+fn unfolding_is_consistent(mesh: &Mesh, piece: &Piece, un: &[[f64; 2]]) -> bool {
+    piece.triangles.iter().all(|t| {
+        (0..3).all(|i| {
+            let (a, b) = (t[i] as usize, t[(i + 1) % 3] as usize);
+            let (x, y) = (
+                mesh.position(piece.vertex_ids[a]),
+                mesh.position(piece.vertex_ids[b]),
+            );
+            let l3 = ((x[0] - y[0]).powi(2) + (x[1] - y[1]).powi(2) + (x[2] - y[2]).powi(2)).sqrt();
+            let l2 = ((un[a][0] - un[b][0]).powi(2) + (un[a][1] - un[b][1]).powi(2)).sqrt();
+            (l2 - l3).abs() <= 1e-9 * l3
+        })
+    })
 }
