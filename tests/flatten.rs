@@ -1234,3 +1234,69 @@ fn unfolding_is_consistent(mesh: &Mesh, piece: &Piece, un: &[[f64; 2]]) -> bool 
         })
     })
 }
+
+/// Two cells of a second patch touching at one vertex: patch 0 then has two holes that
+/// touch, so that vertex is split into two 2D vertices (wedges) of its piece, and the holes
+/// form one loop through it twice. The mesh itself is manifold. Lengths are kept, and the
+/// pieces are exact (the strip is developable).
+#[test]
+fn holes_touching_at_a_vertex() {
+    let (mesh, truth) = cylinder(14, 12, 1.5, |_, _| true);
+    let mut raw = mesh.to_raw();
+    let dt = 1.5 / 13.0;
+    let zs: Vec<f64> = {
+        let mut z: Vec<f64> = raw.positions.iter().map(|p| p[2]).collect();
+        z.sort_by(|a, b| a.partial_cmp(b).unwrap());
+        z.dedup();
+        z
+    };
+    let cell = |p: [f64; 3]| {
+        (
+            (p[1].atan2(p[0]) / dt).floor() as i64,
+            zs.iter().filter(|&&z| z <= p[2]).count() as i64 - 1,
+        )
+    };
+    raw.face_patch = raw
+        .triangles
+        .iter()
+        .map(|t| {
+            let c = t.iter().fold([0.0; 3], |s, &v| {
+                let p = raw.positions[v as usize];
+                [s[0] + p[0] / 3.0, s[1] + p[1] / 3.0, s[2] + p[2] / 3.0]
+            });
+            let (i, j) = cell(c);
+            ((i, j) == (5, 5) || (i, j) == (6, 6)) as u32
+        })
+        .collect();
+    raw.patch_names = vec!["body".into(), "insets".into()];
+    assert_eq!(raw.face_patch.iter().filter(|&&p| p == 1).count(), 4);
+    let mesh = Mesh::new(raw).unwrap().0;
+    let out = flatten::run(&mesh, &Params::default(), &Silent::default()).unwrap();
+    let pat = out.patterns.unwrap();
+    let names: Vec<&str> = pat.pieces.iter().map(|p| p.patch.as_str()).collect();
+    assert_eq!(names, ["body", "insets#1", "insets#2"]);
+    let body = &pat.pieces[0];
+    let n_body = body
+        .vertex_ids
+        .iter()
+        .collect::<std::collections::HashSet<_>>()
+        .len();
+    assert_eq!(body.uv.len(), n_body + 1, "one vertex split in two");
+    assert_eq!(body.boundary_loops.len(), 2);
+    for piece in &pat.pieces {
+        assert!(boundary_rel_error(&mesh, piece) <= 1e-9);
+        let want: Vec<[f64; 2]> = piece
+            .vertex_ids
+            .iter()
+            .map(|&v| truth[v as usize])
+            .collect();
+        let err = rigid_fit_max_error(&piece.uv, &want) / diameter2(&want);
+        assert!(err <= 1e-6, "{}: {err}", piece.patch);
+    }
+    // the insets share seams with the body: 4 edges each, lengths equal on both sides
+    assert_eq!(pat.seams.len(), 2);
+    for s in &pat.seams {
+        assert!((s.lengths[0] - s.length_3d).abs() <= 1e-9 * s.length_3d);
+        assert!((s.lengths[1] - s.length_3d).abs() <= 1e-9 * s.length_3d);
+    }
+}
