@@ -1300,3 +1300,29 @@ fn holes_touching_at_a_vertex() {
         assert!((s.lengths[1] - s.length_3d).abs() <= 1e-9 * s.length_3d);
     }
 }
+
+#[test]
+fn smallest_pieces() {
+    // one triangle and a two-triangle quad: no interior vertex, LPFB alone places everything
+    let tri = mesh_of(
+        vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.3], [0.2, 0.9, 0.1]],
+        vec![[0, 1, 2]],
+    );
+    let quad = mesh_of(
+        vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.5],
+            [0.0, 1.0, 0.5],
+        ],
+        vec![[0, 1, 2], [0, 2, 3]],
+    );
+    for m in [&tri, &quad] {
+        for method in [Method::Lpfb, Method::Lscm] {
+            let piece = &flatten_mesh(m, method).pieces[0];
+            let un = unfold(m, piece);
+            let err = rigid_fit_max_error(&piece.uv, &un) / diameter2(&un);
+            assert!(err < 1e-12, "{method:?}: {err}");
+        }
+    }
+}

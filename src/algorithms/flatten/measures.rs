@@ -122,23 +122,25 @@ fn exact_orient(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> i8 {
         (c[0], a[1], 1.0),
         (c[0], b[1], -1.0),
     ];
-    let mut e: Vec<f64> = Vec::with_capacity(16);
+    let mut e = [0.0f64; 12];
+    let mut len = 0;
     for (x, y, s) in terms {
         let (p, q) = two_prod(x, y);
         for v in [p * s, q * s] {
             // grow-expansion: add v to e, keeping components exact
             let mut qv = v;
-            for comp in e.iter_mut() {
+            for comp in e[..len].iter_mut() {
                 let (sum, err) = two_sum(qv, *comp);
                 *comp = err;
                 qv = sum;
             }
-            e.push(qv);
+            e[len] = qv;
+            len += 1;
         }
     }
     // the most significant non-zero component decides the sign (components are ordered by
     // magnitude after grow-expansion, largest last)
-    for &x in e.iter().rev() {
+    for &x in e[..len].iter().rev() {
         if x > 0.0 {
             return 1;
         }
