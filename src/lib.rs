@@ -9,6 +9,8 @@ pub mod algorithms;
 pub mod fixtures;
 pub mod geometry;
 pub mod io;
+pub mod linalg;
 pub mod mesh;
 pub mod pattern;
 pub mod report;
+pub mod spatial;

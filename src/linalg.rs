@@ -1,0 +1,145 @@
+//! Thin wrappers over faer's sparse LU: a fixed sparsity pattern assembled once from
+//! (row, column) pairs, whose values are refilled every iteration in the same order, and a
+//! solver that computes the symbolic factorisation once and only the numeric one afterwards
+//! (../shared/CRATES.md: the pattern of the FL-mesh KKT system never changes).
+
+use faer::linalg::solvers::Solve;
+use faer::sparse::linalg::solvers::{Lu, SymbolicLu};
+use faer::sparse::{Argsort, Pair, SparseColMat, SymbolicSparseColMat};
+
+/// Why a sparse solve failed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum LinalgError {
+    /// The pattern could not be built (index out of range, too many entries).
+    #[error("sparse pattern: {0}")]
+    Pattern(String),
+    /// The numeric factorisation failed (singular matrix, out of memory).
+    #[error("sparse factorisation: {0}")]
+    Factor(String),
+    /// The solution holds a NaN or an infinity (numerically singular system).
+    #[error("sparse solve produced a non-finite value")]
+    NonFinite,
+}
+
+/// A square sparse matrix with a fixed pattern, its symbolic LU, and the order in which the
+/// caller's value array maps onto it. Duplicate (row, column) pairs are summed.
+pub struct LuSolver {
+    n: usize,
+    symbolic: SymbolicSparseColMat<usize>,
+    argsort: Argsort<usize>,
+    lu_symbolic: SymbolicLu<usize>,
+    lu: Option<Lu<usize, f64>>,
+}
+
+impl std::fmt::Debug for LuSolver {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LuSolver").field("n", &self.n).finish()
+    }
+}
+
+impl LuSolver {
+    /// Build the pattern of an `n × n` matrix from `(row, col)` pairs and its symbolic LU
+    /// (column ordering and elimination structure), once.
+    pub fn new(n: usize, entries: &[(usize, usize)]) -> Result<Self, LinalgError> {
+        let pairs: Vec<Pair<usize, usize>> = entries
+            .iter()
+            .map(|&(row, col)| Pair { row, col })
+            .collect();
+        let (symbolic, argsort) = SymbolicSparseColMat::try_new_from_indices(n, n, &pairs)
+            .map_err(|e| LinalgError::Pattern(format!("{e:?}")))?;
+        let lu_symbolic = SymbolicLu::try_new(symbolic.as_ref())
+            .map_err(|e| LinalgError::Factor(format!("{e:?}")))?;
+        Ok(Self {
+            n,
+            symbolic,
+            argsort,
+            lu_symbolic,
+            lu: None,
+        })
+    }
+
+    /// Dimension.
+    pub fn dim(&self) -> usize {
+        self.n
+    }
+
+    /// Numeric LU of the matrix whose values are `values[k]` at `entries[k]` (the order given
+    /// to [`LuSolver::new`]); reuses the symbolic factorisation.
+    pub fn factor(&mut self, values: &[f64]) -> Result<(), LinalgError> {
+        if values.iter().any(|v| !v.is_finite()) {
+            return Err(LinalgError::NonFinite);
+        }
+        let a = SparseColMat::new_from_argsort(self.symbolic.clone(), &self.argsort, values)
+            .map_err(|e| LinalgError::Factor(format!("{e:?}")))?;
+        let lu = Lu::try_new_with_symbolic(self.lu_symbolic.clone(), a.as_ref())
+            .map_err(|e| LinalgError::Factor(format!("{e:?}")))?;
+        self.lu = Some(lu);
+        Ok(())
+    }
+
+    /// Solve `A x = rhs` in place with the last numeric factorisation.
+    pub fn solve_in_place(&self, rhs: &mut [f64]) -> Result<(), LinalgError> {
+        let lu = self
+            .lu
+            .as_ref()
+            .ok_or_else(|| LinalgError::Factor("solve before factor".into()))?;
+        if rhs.len() != self.n {
+            return Err(LinalgError::Pattern(format!(
+                "right-hand side of length {} for a {}×{} system",
+                rhs.len(),
+                self.n,
+                self.n
+            )));
+        }
+        let m = faer::MatMut::from_column_major_slice_mut(rhs, self.n, 1);
+        lu.solve_in_place(m);
+        if rhs.iter().any(|v| !v.is_finite()) {
+            return Err(LinalgError::NonFinite);
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn solves_small_nonsymmetric_system_and_refactors() {
+        // [[4, 1, 0], [2, 5, 1], [0, 3, 6]] with a duplicate entry split in two.
+        let entries = [
+            (0, 0),
+            (0, 1),
+            (1, 0),
+            (1, 1),
+            (1, 2),
+            (2, 1),
+            (2, 2),
+            (0, 0),
+        ];
+        let mut s = LuSolver::new(3, &entries).unwrap();
+        s.factor(&[3.0, 1.0, 2.0, 5.0, 1.0, 3.0, 6.0, 1.0]).unwrap();
+        let x = [1.0, -2.0, 0.5];
+        let mut b = [
+            4.0 * x[0] + x[1],
+            2.0 * x[0] + 5.0 * x[1] + x[2],
+            3.0 * x[1] + 6.0 * x[2],
+        ];
+        s.solve_in_place(&mut b).unwrap();
+        for i in 0..3 {
+            assert!((b[i] - x[i]).abs() < 1e-12);
+        }
+        // Same pattern, new values: 2·A.
+        s.factor(&[6.0, 2.0, 4.0, 10.0, 2.0, 6.0, 12.0, 2.0])
+            .unwrap();
+        let mut b = [
+            4.0 * x[0] + x[1],
+            2.0 * x[0] + 5.0 * x[1] + x[2],
+            3.0 * x[1] + 6.0 * x[2],
+        ];
+        s.solve_in_place(&mut b).unwrap();
+        for i in 0..3 {
+            assert!((2.0 * b[i] - x[i]).abs() < 1e-12);
+        }
+    }
+}
