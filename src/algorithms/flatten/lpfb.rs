@@ -55,6 +55,8 @@ pub struct Solution {
     pub svd_steps: usize,
     /// Largest constraint residual after the closing steps (normalised lengths, radians).
     pub constraint_residual: f64,
+    /// Step halvings taken by the line search over all iterations.
+    pub backtracks: usize,
 }
 
 /// Neumaier's compensated sum: the running sums of Eq. 6–7 run over the whole loop, and plain
@@ -253,7 +255,26 @@ pub fn solve(
             ap_target[j] = PI + (d / (2.0 * PI)).round() * 2.0 * PI;
         }
     }
+    // Beyond the paper, which starts at θ = a: spread the closed-path deficit 2π − Σ(π − a)
+    // over the vertices in proportion to their share of the boundary length. This satisfies
+    // the linear constraint at once and, where the surface is curved, starts near the circle
+    // the optimum resembles (a hemisphere's geodesic rim has a ≈ π everywhere: θ = a is a
+    // straight line, from which full SQP steps wander into self-crossing stationary points).
+    // The optimum is the same; only the path to it changes.
+    {
+        let mut s = Acc::default();
+        tau0.iter().for_each(|&t| s.add(t));
+        let deficit = 2.0 * PI - s.value();
+        let total: f64 = l.iter().sum();
+        for i in 0..n {
+            tau[i] += deficit * 0.5 * (l[(i + n - 1) % n] + l[i]) / total;
+        }
+    }
     let mut lambda = vec![1.0; r];
+    let mut tau_try = vec![0.0; n];
+    let mut mu = 0.0f64;
+    let mut backtracks = 0;
+    let mut fresh = false;
     let mut b_theta = vec![0.0; n];
     let mut iterations = 0;
     let mut converged = false;
@@ -264,7 +285,10 @@ pub fn solve(
         if control.cancelled() {
             return Err(AlgoError::Cancelled);
         }
-        w.eval(p, &l, &tau, &ap_target);
+        // the line search already evaluated the accepted point
+        if !std::mem::take(&mut fresh) {
+            w.eval(p, &l, &tau, &ap_target);
+        }
         // B_θ = −∂J/∂θ = −(θ − a) − Λᵀλ ; B_λ = −g  (Appendix, Statements 1–2)
         // θ − a = (π − τ) − (π − τ0) = τ0 − τ
         for ((b, t), t0) in b_theta.iter_mut().zip(&tau).zip(&tau0) {
@@ -302,11 +326,41 @@ pub fn solve(
         svd_steps += used_svd as usize;
         // Eq. 14: δθ = B_θ − Λᵀ δλ
         sub_lam_t(&w.lam_mat, n, &dl, &mut b_theta);
-        for (t, d) in tau.iter_mut().zip(&b_theta) {
-            *t -= d; // θ += δθ
+        // Step length (beyond the paper's full step): backtrack on the ℓ1 merit
+        // ½‖θ − a‖² + μ‖g‖₁, with μ above the new multipliers so that the SQP direction
+        // descends; full steps are kept once the constraints hold to 1e-10, where the merit
+        // could refuse them for second-order reasons (Maratos) and Newton converges anyway.
+        let lam_max = lambda
+            .iter()
+            .zip(&dl)
+            .fold(0.0f64, |m, (a, b)| m.max((a + b).abs()));
+        mu = mu.max(1.5 * lam_max + 1e-3);
+        let merit = |w: &Work, t: &[f64]| -> f64 {
+            0.5 * t
+                .iter()
+                .zip(&tau0)
+                .map(|(x, y)| (x - y) * (x - y))
+                .sum::<f64>()
+                + mu * w.g.iter().map(|g| g.abs()).sum::<f64>()
+        };
+        let m0 = merit(&w, &tau);
+        let mut alpha = 1.0;
+        loop {
+            for ((t, &t0), d) in tau_try.iter_mut().zip(&tau).zip(&b_theta) {
+                *t = t0 - alpha * d; // θ += α δθ
+            }
+            w.eval(p, &l, &tau_try, &ap_target);
+            let gmax = w.g.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+            if merit(&w, &tau_try) <= m0 || gmax <= 1e-10 || alpha < 1e-6 {
+                break;
+            }
+            alpha *= 0.5;
+            backtracks += 1;
         }
+        fresh = true;
+        std::mem::swap(&mut tau, &mut tau_try);
         for (l, d) in lambda.iter_mut().zip(&dl) {
-            *l += d;
+            *l += alpha * d;
         }
         iterations += 1;
     }
@@ -351,6 +405,7 @@ pub fn solve(
         grad_norm,
         svd_steps,
         constraint_residual,
+        backtracks,
     })
 }
 
@@ -454,5 +509,31 @@ mod tests {
             let d = ((q[0] - c[0]).powi(2) + (q[1] - c[1]).powi(2)).sqrt();
             assert!((d - rad).abs() < 1e-12);
         }
+    }
+
+    /// A geodesic rim (a hemisphere's equator: every a_i = π) starts as a straight line under
+    /// θ = a. The solver must still reach the optimum, a convex closed polygon, rather than a
+    /// self-crossing stationary point (which full SQP steps from θ = a ran into).
+    #[test]
+    fn straight_rim_closes_into_a_convex_polygon() {
+        let n = 48;
+        let p = Problem {
+            lengths: (0..n)
+                .map(|k| 0.13 * (1.0 + 0.2 * (k as f64 * 0.9).sin()))
+                .collect(),
+            angles: vec![PI; n],
+            pairs: vec![],
+            antiparallel: vec![],
+        };
+        let s = solve(&p, 200, 1e-10, &crate::algorithms::Silent::default(), "t").unwrap();
+        assert!(s.converged, "‖∇J‖ = {}", s.grad_norm);
+        // convex: every turning angle positive, summing to 2π
+        let turn: f64 = s.theta.iter().map(|t| PI - t).sum();
+        assert!((turn - 2.0 * PI).abs() < 1e-12);
+        assert!(s.theta.iter().all(|&t| t < PI && t > 0.0), "{:?}", s.theta);
+        // the loop closes: the last edge leads back to the first vertex with its own length
+        let (a, b) = (s.positions[n - 1], s.positions[0]);
+        let last = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt();
+        assert!((last - p.lengths[n - 1]).abs() < 1e-12 * p.lengths[n - 1].max(1.0));
     }
 }

@@ -152,6 +152,8 @@ pub struct PieceInfo {
     pub grad_norm: f64,
     /// Iterations that needed the SVD pseudo-inverse.
     pub svd_steps: usize,
+    /// Step halvings of the LPFB line search.
+    pub backtracks: usize,
     /// Largest LPFB constraint residual after closing.
     pub constraint_residual: f64,
     /// Largest distance between copies of one vertex on the LPFB of the cut disk, relative to
@@ -276,6 +278,7 @@ pub fn lpfb_boundary(
     info.converged = sol.converged;
     info.grad_norm = sol.grad_norm;
     info.svd_steps = sol.svd_steps;
+    info.backtracks = sol.backtracks;
     info.constraint_residual = sol.constraint_residual;
     // Sec. 3.2 step 6: back to the piece. Boundary vertices take their (single) copy; cut
     // path vertices have several copies, whose spread is the coincidence residual.
