@@ -4,6 +4,7 @@
 //! cancellation ([`Control`]), typed parameters parsed from JSON, and the dispatcher by job
 //! kind used by the CLI (`flatmesh run`) and the service alike.
 
+pub mod fl_mesh;
 pub mod flatten;
 pub mod report_job;
 
@@ -72,7 +73,7 @@ pub enum AlgoError {
 }
 
 /// The job kinds implemented, in the order the CLI lists them.
-pub const KINDS: &[&str] = &["report", "flatten"];
+pub const KINDS: &[&str] = &["report", "flatten", "fl-mesh"];
 
 /// What a run produced: an output mesh (for optimisers), and a JSON object of
 /// algorithm-specific figures (iterations, converged, history, …) merged into `report.json`.
@@ -122,6 +123,7 @@ pub fn validate(
     match kind {
         "report" => parse_params::<report_job::Params>(params).map(|_| ()),
         "flatten" => parse_params::<flatten::Params>(params)?.check(),
+        "fl-mesh" => parse_params::<fl_mesh::Params>(params)?.check(),
         other => Err(AlgoError::UnknownKind(other.to_string())),
     }
 }
@@ -136,6 +138,7 @@ pub fn run(
     match kind {
         "report" => report_job::run(&input.mesh, &parse_params(params)?, control),
         "flatten" => flatten::run(&input.mesh, &parse_params(params)?, control),
+        "fl-mesh" => fl_mesh::run(&input.mesh, &parse_params(params)?, control),
         other => Err(AlgoError::UnknownKind(other.to_string())),
     }
 }

@@ -1,0 +1,1091 @@
+//! The `fl-mesh` job: the closest fair surface whose interior vertices are all flattenable
+//! (wang-flattenable-laplacian-meshes, Sec. 2.3), by sequential linearly constrained
+//! programming on the KKT system of Eq. 7.
+//!
+//! Unknowns are the positions of the interior vertices (whole closed fan in one patch);
+//! boundary and seam vertices are never written, so they stay bit-identical. Each iteration
+//! assembles Eq. 7 with H of Eq. 10 (w1 = 1, w2 = 0.1 by default), B_p of Eq. 8, B_λ of Eq. 9
+//! and Λ = ∂θ/∂v of Eq. 11 from Propositions 1 and 2, factors it with faer's sparse LU (the
+//! symbolic factorisation is computed once per mesh, only the numeric one every iteration) and
+//! solves for δ and λ.
+//!
+//! Beyond the paper:
+//! - Step length. The paper always moves by τδ with τ = 0.25 (`step_rule = "fixed"` does
+//!   that). The default `step_rule = "merit"` tries the full step first and halves it until the
+//!   merit φ(v) = ‖(B_p(v) − Λ(v)ᵀλ)/h̄‖² + ‖2π − θ(v)‖² (the KKT residual with the new λ, h̄ the
+//!   mean edge length) decreases by the Armijo rule; a trial that degenerates or flips a
+//!   triangle counts as infinite merit. When no trial decreases φ it falls back to τ. Since H is
+//!   the exact Jacobian of B_p and only λ·∇²θ is neglected, full steps are taken almost always
+//!   and ϖ_max falls quadratically near the end instead of by 0.75 per iteration.
+//! - Regularisation. The (2,2) block is −ε I with ε = 1e-10 (rows scaled by h̄ so that all
+//!   blocks are O(1)). A planar vertex has ∂θ = 0 (θ is stationary at 2π), which would make
+//!   Eq. 7 singular; the shift keeps it solvable and biases θ − 2π by at most ε·|λ|, far below
+//!   the tolerance.
+//! - Stop. Converged when ϖ_max ≤ `tolerance` (and, with `until = "stationary"`, also the
+//!   paper's ‖δ‖ < `step_tolerance`, measured as max_v |δ_v| / h̄ so it does not depend on
+//!   units or mesh size). A step below `step_tolerance` with ϖ_max above the tolerance, or
+//!   ϖ_max not halving within `stall_iterations`, is a stall.
+//! - Obstructions (Sec. 2.3). On a stall, interior vertices whose ϖ stayed among the highest
+//!   (≥ 0.1 ϖ_max) for `stall_iterations` iterations get their fan refined √3-style (Kobbelt):
+//!   each fan triangle is split at its centroid and the spokes are flipped, so the vertex is
+//!   surrounded by new free vertices. New vertices are numbered after the existing ones.
+//!   After `max_refinements` rounds the run ends with `converged: false` and the stuck
+//!   vertices named.
+//! - Closed components whose Euler characteristic χ ≠ 0 cannot become flattenable
+//!   (Gauss–Bonnet: the angle defects sum to 2πχ); their vertices are held fixed and reported
+//!   as stuck, and the run ends with `converged: false`.
+//!
+//! An already flattenable input (ϖ_max ≤ tolerance) is returned unchanged with the default
+//! `until = "flattenable"`; with `until = "stationary"` it moves to the paper's optimum, i.e.
+//! by exactly the fairing that w1 and w2 ask for while every constraint stays satisfied
+//! (for a planar mesh: the solution of (w1 L + w2 I) v = w2 v⁰ in the plane).
+
+use super::{AlgoError, Control, Outcome, Progress};
+use crate::geometry::{corner_angle, corner_angle_gradient};
+use crate::linalg::LuSolver;
+use crate::mesh::{cross, dot, sub, Mesh, RawMesh, VertexKind, NONE};
+use serde::{Deserialize, Serialize};
+use serde_json::json;
+use std::f64::consts::TAU;
+
+/// Step-length rule.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum StepRule {
+    /// Armijo backtracking on the KKT-residual merit, full step first (default).
+    #[default]
+    Merit,
+    /// The paper's fixed damping: X ← X + τδ (Algorithm 1).
+    Fixed,
+}
+
+/// What v⁰ in J_pos (Eq. 5) is.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Anchor {
+    /// The input position of each vertex (default).
+    #[default]
+    Input,
+    /// The closest point to the current position on the input surface, recomputed each
+    /// iteration.
+    Closest,
+}
+
+/// When to stop iterating.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Until {
+    /// As soon as ϖ_max ≤ tolerance (default).
+    #[default]
+    Flattenable,
+    /// ϖ_max ≤ tolerance and the step below `step_tolerance` (the paper's optimum).
+    Stationary,
+}
+
+/// Parameters of `fl-mesh`.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Params {
+    /// Weight of the fairness term J_fair (Eq. 4).
+    pub w1: f64,
+    /// Weight of the position term J_pos (Eq. 5); must be much smaller than w1.
+    pub w2: f64,
+    /// Damping factor of Algorithm 1 (the fixed rule, and the merit rule's fallback).
+    pub tau: f64,
+    /// `merit` (default) or `fixed`.
+    pub step_rule: StepRule,
+    /// `input` (default) or `closest`.
+    pub anchor: Anchor,
+    /// `flattenable` (default) or `stationary`.
+    pub until: Until,
+    /// Target ϖ_max in radians.
+    pub tolerance: f64,
+    /// ‖δ‖ threshold, as max_v |δ_v| over the mean edge length.
+    pub step_tolerance: f64,
+    /// Most Newton iterations in total (over all refinement rounds).
+    pub max_iterations: usize,
+    /// Refine around stuck vertices (Sec. 2.3).
+    pub refine: bool,
+    /// Most refinement rounds.
+    pub max_refinements: usize,
+    /// Iterations without ϖ_max halving that count as a stall.
+    pub stall_iterations: usize,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Params {
+            w1: 1.0,
+            w2: 0.1,
+            tau: 0.25,
+            step_rule: StepRule::Merit,
+            anchor: Anchor::Input,
+            until: Until::Flattenable,
+            tolerance: crate::geometry::DEVELOPABLE_TOLERANCE,
+            step_tolerance: 1e-5,
+            max_iterations: 200,
+            refine: true,
+            max_refinements: 3,
+            stall_iterations: 8,
+        }
+    }
+}
+
+fn bad(key: &str, message: String) -> AlgoError {
+    AlgoError::InvalidParam {
+        key: key.into(),
+        message,
+    }
+}
+
+impl Params {
+    /// Range checks.
+    pub fn check(&self) -> Result<(), AlgoError> {
+        if !(self.w1.is_finite() && self.w1 >= 0.0) {
+            return Err(bad(
+                "w1",
+                format!("must be finite and ≥ 0, got {}", self.w1),
+            ));
+        }
+        if !(self.w2.is_finite() && self.w2 > 0.0) {
+            return Err(bad(
+                "w2",
+                format!(
+                    "must be finite and > 0 (it keeps H regular), got {}",
+                    self.w2
+                ),
+            ));
+        }
+        if !(self.tau > 0.0 && self.tau <= 1.0) {
+            return Err(bad("tau", format!("must be in (0, 1], got {}", self.tau)));
+        }
+        if !(self.tolerance > 0.0 && self.tolerance < 1.0) {
+            return Err(bad(
+                "tolerance",
+                format!("must be in (0, 1) rad, got {}", self.tolerance),
+            ));
+        }
+        if !(self.step_tolerance > 0.0 && self.step_tolerance < 1.0) {
+            return Err(bad(
+                "step_tolerance",
+                format!("must be in (0, 1), got {}", self.step_tolerance),
+            ));
+        }
+        if self.max_iterations == 0 || self.max_iterations > 100_000 {
+            return Err(bad(
+                "max_iterations",
+                format!("must be in 1..=100000, got {}", self.max_iterations),
+            ));
+        }
+        if self.max_refinements > 20 {
+            return Err(bad(
+                "max_refinements",
+                format!("must be in 0..=20, got {}", self.max_refinements),
+            ));
+        }
+        if self.stall_iterations < 2 || self.stall_iterations > 1000 {
+            return Err(bad(
+                "stall_iterations",
+                format!("must be in 2..=1000, got {}", self.stall_iterations),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// One row of the iteration history.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct HistoryEntry {
+    /// Iteration (1-based, counted over all refinement rounds).
+    pub iteration: usize,
+    /// ϖ_max before the step.
+    pub max_flattenability: f64,
+    /// max_v |δ_v| / h̄ of the full Newton direction.
+    pub step_norm: f64,
+    /// Step length taken (τ for the fixed rule).
+    pub step_length: f64,
+}
+
+/// What a run found, besides the mesh.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct Report {
+    /// Newton iterations taken.
+    pub iterations: usize,
+    /// ϖ_max ≤ tolerance on the output (and the step criterion, for `until = stationary`).
+    pub converged: bool,
+    /// Why the run ended.
+    pub stop_reason: String,
+    /// Per iteration.
+    pub history: Vec<HistoryEntry>,
+    /// Vertices whose fans were refined (ids in the numbering of the round they were refined
+    /// in, which keeps all earlier ids).
+    pub refined: Vec<u32>,
+    /// Interior vertices with ϖ above the tolerance at the end.
+    pub stuck_vertices: Vec<u32>,
+    /// ϖ_max of the output, measured by `geometry`.
+    pub max_flattenability: f64,
+    /// ‖B_p − Λᵀλ‖∞ / h̄ at the last solve: how far from the paper's stationary point.
+    pub stationarity: f64,
+    /// Number of unknown (interior, free) vertices at the end.
+    pub free_vertices: usize,
+}
+
+/// Run `fl-mesh`.
+pub fn run(mesh: &Mesh, params: &Params, control: &dyn Control) -> Result<Outcome, AlgoError> {
+    params.check()?;
+    let (out, report) = solve(mesh, params, control)?;
+    let (lo, hi) = mesh.bbox();
+    let d = sub(hi, lo);
+    let diag = dot(d, d).sqrt();
+    let hd = crate::spatial::vertex_surface_hausdorff(
+        out.positions(),
+        out.triangles(),
+        mesh.positions(),
+        mesh.triangles(),
+    );
+    let mut summary = match serde_json::to_value(&report) {
+        Ok(serde_json::Value::Object(m)) => m,
+        _ => serde_json::Map::new(),
+    };
+    summary.insert(
+        "hausdorff_to_input".into(),
+        json!({
+            "absolute": hd,
+            "relative": if diag > 0.0 { hd / diag } else { 0.0 },
+        }),
+    );
+    Ok(Outcome {
+        mesh: Some(out),
+        patterns: None,
+        summary,
+    })
+}
+
+/// The solver proper: the output mesh (input vertices first, refinement vertices after) and
+/// what happened.
+pub fn solve(
+    mesh: &Mesh,
+    params: &Params,
+    control: &dyn Control,
+) -> Result<(Mesh, Report), AlgoError> {
+    params.check()?;
+    let mut report = Report::default();
+    let mut current = mesh.clone();
+    let impossible = impossible_vertices(mesh);
+    let input_grid = match params.anchor {
+        Anchor::Closest => Some(crate::spatial::TriangleGrid::new(
+            mesh.positions(),
+            mesh.triangles(),
+        )),
+        Anchor::Input => None,
+    };
+    let mut anchors: Vec<[f64; 3]> = mesh.positions().to_vec();
+    let mut rounds = 0usize;
+    loop {
+        let mut sys = System::new(&current, &impossible, params)?;
+        let end = sys.iterate(
+            &current,
+            &mut anchors,
+            input_grid.as_ref(),
+            params,
+            control,
+            &mut report,
+        )?;
+        current = current
+            .with_positions(sys.pos.clone())
+            .map_err(|e| AlgoError::Input(format!("fl-mesh produced an invalid mesh: {e}")))?;
+        report.stationarity = sys.stationarity;
+        report.free_vertices = sys.n;
+        match end {
+            End::Stalled(stuck)
+                if params.refine
+                    && rounds < params.max_refinements
+                    && report.iterations < params.max_iterations
+                    && !stuck.is_empty() =>
+            {
+                rounds += 1;
+                let chosen = independent(&current, &stuck);
+                control.progress(&Progress {
+                    stage: "refine".into(),
+                    iteration: rounds,
+                    max_flattenability: None,
+                    step_norm: None,
+                });
+                let raw = refine_sqrt3(&current, &chosen);
+                for p in &raw.positions[anchors.len()..] {
+                    anchors.push(*p);
+                }
+                report.refined.extend_from_slice(&chosen);
+                current = Mesh::new(raw)
+                    .map_err(|e| {
+                        AlgoError::Input(format!("refinement produced an invalid mesh: {e}"))
+                    })?
+                    .0;
+                continue;
+            }
+            End::Stalled(_) => {
+                if report.stop_reason.is_empty() {
+                    report.stop_reason = "stalled".into();
+                }
+            }
+            End::Done(reason) => report.stop_reason = reason,
+        }
+        break;
+    }
+    // The verdict comes from the mesh core's own measure, not from the solver's numbers.
+    let theta = crate::geometry::angle_sums(&current);
+    let varpi = crate::geometry::flattenability(&current, &theta);
+    report.max_flattenability = varpi.iter().copied().fold(0.0, f64::max);
+    report.stuck_vertices = (0..varpi.len() as u32)
+        .filter(|&v| varpi[v as usize] > params.tolerance)
+        .collect();
+    report
+        .stuck_vertices
+        .sort_by(|a, b| varpi[*b as usize].total_cmp(&varpi[*a as usize]));
+    let flat = report.max_flattenability <= params.tolerance;
+    report.converged = flat
+        && match params.until {
+            Until::Flattenable => true,
+            Until::Stationary => report.stop_reason == "stationary",
+        };
+    if impossible.iter().any(|&b| b) && report.stop_reason != "cancelled" {
+        report.stop_reason = format!(
+            "{}; closed component(s) with Euler characteristic ≠ 0 cannot be flattenable (Gauss–Bonnet)",
+            report.stop_reason
+        );
+    }
+    Ok((current, report))
+}
+
+/// Vertices of closed components (no boundary or seam vertex) whose Euler characteristic is not
+/// zero: Σ(2π − θ) = 2πχ there, so not every vertex can reach θ = 2π.
+fn impossible_vertices(mesh: &Mesh) -> Vec<bool> {
+    let nv = mesh.num_vertices();
+    let mut parent: Vec<u32> = (0..nv as u32).collect();
+    fn find(p: &mut [u32], mut x: u32) -> u32 {
+        while p[x as usize] != x {
+            p[x as usize] = p[p[x as usize] as usize];
+            x = p[x as usize];
+        }
+        x
+    }
+    for t in mesh.triangles() {
+        for k in 0..2 {
+            let (a, b) = (find(&mut parent, t[k]), find(&mut parent, t[k + 1]));
+            if a != b {
+                parent[a.max(b) as usize] = a.min(b);
+            }
+        }
+    }
+    let mut comp_v = vec![0i64; nv];
+    let mut comp_f = vec![0i64; nv];
+    let mut comp_e = vec![0i64; nv];
+    let mut open = vec![false; nv];
+    let kinds = mesh.conn().kinds();
+    for v in 0..nv as u32 {
+        if kinds[v as usize] == VertexKind::Unreferenced {
+            continue;
+        }
+        let r = find(&mut parent, v) as usize;
+        comp_v[r] += 1;
+        if kinds[v as usize] != VertexKind::Interior {
+            open[r] = true;
+        }
+    }
+    for t in mesh.triangles() {
+        let r = find(&mut parent, t[0]) as usize;
+        comp_f[r] += 1;
+    }
+    for e in mesh.conn().edges() {
+        let r = find(&mut parent, e[0]) as usize;
+        comp_e[r] += 1;
+    }
+    (0..nv as u32)
+        .map(|v| {
+            if kinds[v as usize] == VertexKind::Unreferenced {
+                return false;
+            }
+            let r = find(&mut parent, v) as usize;
+            !open[r] && comp_v[r] - comp_e[r] + comp_f[r] != 0
+        })
+        .collect()
+}
+
+enum End {
+    Done(String),
+    Stalled(Vec<u32>),
+}
+
+/// The KKT system of one mesh (fixed connectivity): pattern, symbolic LU, work arrays.
+struct System {
+    /// Free vertices (interior, not in an impossible component), row r ↔ vertex free[r].
+    free: Vec<u32>,
+    n: usize,
+    /// Row of each vertex, NONE when fixed.
+    row: Vec<u32>,
+    /// Per row r: slots slot_start[r]..slot_start[r+1] hold vertex q = free[r] first, then its
+    /// ring counter-clockwise; `slot_col` is the row of that vertex (NONE when fixed).
+    slot_start: Vec<usize>,
+    slot_vertex: Vec<u32>,
+    slot_col: Vec<u32>,
+    /// Where Λ's six values of a slot start in `values` (NONE when the column is fixed).
+    slot_value: Vec<u32>,
+    values: Vec<f64>,
+    lu: LuSolver,
+    /// Mean edge length: the length scale.
+    h: f64,
+    /// Current positions (all vertices).
+    pos: Vec<[f64; 3]>,
+    /// θ per row, gradients per slot, at `pos`.
+    theta: Vec<f64>,
+    grad: Vec<[f64; 3]>,
+    /// Trial copies.
+    trial_pos: Vec<[f64; 3]>,
+    trial_theta: Vec<f64>,
+    trial_grad: Vec<[f64; 3]>,
+    rhs: Vec<f64>,
+    rhs_t: Vec<f64>,
+    force: Vec<[f64; 3]>,
+    stationarity: f64,
+}
+
+const REGULARISATION: f64 = 1e-10;
+/// Most tangential (fairness) movement per iteration, in mean edge lengths.
+const TANGENT_RADIUS: f64 = 0.5;
+
+impl System {
+    fn new(mesh: &Mesh, impossible: &[bool], params: &Params) -> Result<Self, AlgoError> {
+        let conn = mesh.conn();
+        let nv = mesh.num_vertices();
+        let mut row = vec![NONE; nv];
+        let mut free = Vec::new();
+        for v in conn.interior_vertices() {
+            if impossible.get(v as usize).copied().unwrap_or(false) {
+                continue;
+            }
+            row[v as usize] = free.len() as u32;
+            free.push(v);
+        }
+        let n = free.len();
+        let mut entries: Vec<(usize, usize)> = Vec::new();
+        let mut values: Vec<f64> = Vec::new();
+        // H ⊗ I3 (Eq. 10): constant.
+        for (r, &v) in free.iter().enumerate() {
+            let ring = conn.ring_of(v);
+            let off = -params.w1 / ring.len() as f64;
+            for c in 0..3 {
+                entries.push((c * n + r, c * n + r));
+                values.push(params.w1 + params.w2);
+                for &p in ring {
+                    let j = row[p as usize];
+                    if j != NONE {
+                        entries.push((c * n + r, c * n + j as usize));
+                        values.push(off);
+                    }
+                }
+            }
+        }
+        let mut slot_start = vec![0usize];
+        let mut slot_vertex = Vec::new();
+        let mut slot_col = Vec::new();
+        let mut slot_value = Vec::new();
+        for (r, &v) in free.iter().enumerate() {
+            for &p in std::iter::once(&v).chain(conn.ring_of(v)) {
+                slot_vertex.push(p);
+                let j = row[p as usize];
+                slot_col.push(j);
+                if j == NONE {
+                    slot_value.push(NONE);
+                    continue;
+                }
+                slot_value.push(values.len() as u32);
+                let j = j as usize;
+                for c in 0..3 {
+                    entries.push((3 * n + r, c * n + j));
+                    values.push(0.0);
+                }
+                for c in 0..3 {
+                    entries.push((c * n + j, 3 * n + r));
+                    values.push(0.0);
+                }
+            }
+            slot_start.push(slot_vertex.len());
+        }
+        for r in 0..n {
+            entries.push((3 * n + r, 3 * n + r));
+            values.push(-REGULARISATION);
+        }
+        let h = mean_edge_length(mesh);
+        if !(h > 0.0 && h.is_finite()) {
+            return Err(AlgoError::Input(
+                "mesh has no edge of positive length".into(),
+            ));
+        }
+        let lu = if n > 0 {
+            LuSolver::new(4 * n, &entries)
+                .map_err(|e| AlgoError::Input(format!("KKT system: {e}")))?
+        } else {
+            LuSolver::new(0, &[]).map_err(|e| AlgoError::Input(format!("KKT system: {e}")))?
+        };
+        let ns = slot_vertex.len();
+        Ok(System {
+            free,
+            n,
+            row,
+            slot_start,
+            slot_vertex,
+            slot_col,
+            slot_value,
+            values,
+            lu,
+            h,
+            pos: mesh.positions().to_vec(),
+            theta: vec![0.0; n],
+            grad: vec![[0.0; 3]; ns],
+            trial_pos: mesh.positions().to_vec(),
+            trial_theta: vec![0.0; n],
+            trial_grad: vec![[0.0; 3]; ns],
+            rhs: vec![0.0; 4 * n],
+            rhs_t: vec![0.0; 4 * n],
+            force: vec![[0.0; 3]; n],
+            stationarity: 0.0,
+        })
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn iterate(
+        &mut self,
+        mesh: &Mesh,
+        anchors: &mut [[f64; 3]],
+        grid: Option<&crate::spatial::TriangleGrid>,
+        params: &Params,
+        control: &dyn Control,
+        report: &mut Report,
+    ) -> Result<End, AlgoError> {
+        let tris = mesh.triangles();
+        let conn = mesh.conn();
+        let n = self.n;
+        if n == 0 {
+            return Ok(End::Done("no free interior vertex".into()));
+        }
+        let mut lambda = vec![0.0; n];
+        let mut delta = vec![[0.0; 3]; n];
+        let mut dn = vec![[0.0; 3]; n];
+        let mut dt = vec![[0.0; 3]; n];
+        let mut wmax_window: std::collections::VecDeque<f64> = Default::default();
+        let mut high_streak = vec![0usize; n];
+        let mut last_step: Option<f64> = None;
+        eval(
+            &self.pos,
+            tris,
+            conn,
+            &self.free,
+            &self.slot_start,
+            &mut self.theta,
+            &mut self.grad,
+        );
+        loop {
+            if control.cancelled() {
+                return Err(AlgoError::Cancelled);
+            }
+            let wmax = self
+                .theta
+                .iter()
+                .map(|t| (TAU - t).abs())
+                .fold(0.0, f64::max);
+            if !wmax.is_finite() {
+                return Ok(End::Done("non-finite angle sum".into()));
+            }
+            let flat = wmax <= params.tolerance;
+            if flat && params.until == Until::Flattenable {
+                return Ok(End::Done("flattenable".into()));
+            }
+            if let Some(s) = last_step {
+                if s < params.step_tolerance {
+                    if flat {
+                        return Ok(End::Done("stationary".into()));
+                    }
+                    return Ok(End::Stalled(self.stuck(&high_streak, params)));
+                }
+            }
+            if report.iterations >= params.max_iterations {
+                return Ok(if flat {
+                    End::Done("max_iterations".into())
+                } else {
+                    report.stop_reason = "max_iterations".into();
+                    End::Stalled(Vec::new())
+                });
+            }
+            // Stall: ϖ_max has not halved over the window.
+            for (r, t) in self.theta.iter().enumerate() {
+                if (TAU - t).abs() >= 0.1 * wmax && (TAU - t).abs() > params.tolerance {
+                    high_streak[r] += 1;
+                } else {
+                    high_streak[r] = 0;
+                }
+            }
+            wmax_window.push_back(wmax);
+            if wmax_window.len() > params.stall_iterations {
+                let old = wmax_window.pop_front().unwrap_or(wmax);
+                if !flat && wmax > 0.5 * old {
+                    report.stop_reason = "stalled".into();
+                    return Ok(End::Stalled(self.stuck(&high_streak, params)));
+                }
+            }
+            if let Some(g) = grid {
+                for &v in &self.free {
+                    anchors[v as usize] = g.closest(self.pos[v as usize]).0;
+                }
+            }
+            // Assemble Λ (Eq. 11–13), scaled by h̄ so that every block is O(1).
+            let h = self.h;
+            for r in 0..n {
+                for s in self.slot_start[r]..self.slot_start[r + 1] {
+                    let k = self.slot_value[s];
+                    if k == NONE {
+                        continue;
+                    }
+                    let g = self.grad[s];
+                    let k = k as usize;
+                    for c in 0..3 {
+                        self.values[k + c] = h * g[c];
+                        self.values[k + 3 + c] = h * g[c];
+                    }
+                }
+            }
+            // Two right-hand sides with one factorisation (Eq. 7 is linear in B): the normal
+            // step δ_n for [0; h̄·B_λ] (Eq. 9) and the tangential step δ_t for [B_p; 0]
+            // (Eq. 8). Their sum is the paper's δ.
+            for (r, &v) in self.free.iter().enumerate() {
+                let b = b_p(&self.pos, anchors, conn.ring_of(v), v, params);
+                for c in 0..3 {
+                    self.rhs[c * n + r] = 0.0;
+                    self.rhs_t[c * n + r] = b[c];
+                }
+                self.rhs[3 * n + r] = h * (TAU - self.theta[r]);
+                self.rhs_t[3 * n + r] = 0.0;
+            }
+            let solved = self
+                .lu
+                .factor(&self.values)
+                .and_then(|_| self.lu.solve_in_place(&mut self.rhs))
+                .and_then(|_| self.lu.solve_in_place(&mut self.rhs_t));
+            if let Err(e) = solved {
+                report.stop_reason = format!("linear solve failed: {e}");
+                return Ok(End::Stalled(self.stuck(&high_streak, params)));
+            }
+            let mut step_norm = 0.0f64;
+            let mut tan_norm = 0.0f64;
+            for r in 0..n {
+                dn[r] = [self.rhs[r], self.rhs[n + r], self.rhs[2 * n + r]];
+                dt[r] = [self.rhs_t[r], self.rhs_t[n + r], self.rhs_t[2 * n + r]];
+                let d = [0, 1, 2].map(|c| dn[r][c] + dt[r][c]);
+                step_norm = step_norm.max(dot(d, d).sqrt());
+                tan_norm = tan_norm.max(dot(dt[r], dt[r]).sqrt());
+                lambda[r] = h * self.rhs_t[3 * n + r];
+            }
+            step_norm /= h;
+            tan_norm /= h;
+            self.stationarity = self.force_residual_max(conn, anchors, &lambda, params, false);
+            let alpha = match params.step_rule {
+                StepRule::Fixed => {
+                    for r in 0..n {
+                        delta[r] = [0, 1, 2].map(|c| dn[r][c] + dt[r][c]);
+                    }
+                    self.try_step(tris, conn, &delta, params.tau);
+                    params.tau
+                }
+                StepRule::Merit => {
+                    // The fairness part may ask to move far (the uniform Laplacian also
+                    // redistributes vertices); its linearisation of θ is trusted over at most
+                    // half a mean edge length per iteration.
+                    let s = if tan_norm > TANGENT_RADIUS {
+                        TANGENT_RADIUS / tan_norm
+                    } else {
+                        1.0
+                    };
+                    for r in 0..n {
+                        delta[r] = [0, 1, 2].map(|c| dn[r][c] + s * dt[r][c]);
+                    }
+                    // Accept the first α (1, ½, ¼, …) that lowers the violation ϖ_max by the
+                    // Armijo rule (δ_n is a Gauss–Newton step on 2π − θ, δ_t is tangent to
+                    // the constraints) or keeps it under half the tolerance.
+                    let mut best = (f64::INFINITY, params.tau);
+                    let mut alpha = 1.0;
+                    let mut accepted = None;
+                    for _ in 0..8 {
+                        let ok = self.try_step(tris, conn, &delta, alpha);
+                        let w = if ok {
+                            self.trial_theta
+                                .iter()
+                                .map(|t| (TAU - t).abs())
+                                .fold(0.0, f64::max)
+                        } else {
+                            f64::INFINITY
+                        };
+                        if std::env::var_os("FLDEBUG").is_some() {
+                            eprintln!("   alpha {alpha} s {s:.3} ok {ok} w {w:e} w0 {wmax:e}");
+                        }
+                        if w <= (1.0 - 1e-4 * alpha) * wmax || w <= 0.5 * params.tolerance {
+                            accepted = Some(alpha);
+                            break;
+                        }
+                        if w < best.0 {
+                            best = (w, alpha);
+                        }
+                        alpha *= 0.5;
+                    }
+                    match accepted {
+                        Some(a) => a,
+                        None => {
+                            let a = if best.0.is_finite() {
+                                best.1
+                            } else {
+                                params.tau
+                            };
+                            self.try_step(tris, conn, &delta, a);
+                            a
+                        }
+                    }
+                }
+            };
+            if std::env::var_os("FLDEBUG").is_some() {
+                eprintln!(
+                    "it {} wmax {wmax:e} step {step_norm:e} tan {tan_norm:e} alpha {alpha} stat {:e}",
+                    report.iterations, self.stationarity
+                );
+            }
+            // Accept the trial state (try_step left it in trial_*); a step that degenerates a
+            // triangle even at the fallback length is refused.
+            if !self.trial_valid(tris) {
+                report.stop_reason = "every step length degenerates a triangle".into();
+                return Ok(End::Stalled(self.stuck(&high_streak, params)));
+            }
+            std::mem::swap(&mut self.pos, &mut self.trial_pos);
+            std::mem::swap(&mut self.theta, &mut self.trial_theta);
+            std::mem::swap(&mut self.grad, &mut self.trial_grad);
+            report.iterations += 1;
+            last_step = Some(step_norm);
+            report.history.push(HistoryEntry {
+                iteration: report.iterations,
+                max_flattenability: wmax,
+                step_norm,
+                step_length: alpha,
+            });
+            control.progress(&Progress {
+                stage: "newton".into(),
+                iteration: report.iterations,
+                max_flattenability: Some(wmax),
+                step_norm: Some(step_norm),
+            });
+        }
+    }
+
+    /// Vertices whose ϖ stayed high through the stall window, worst first; else the worst one.
+    fn stuck(&self, high_streak: &[usize], params: &Params) -> Vec<u32> {
+        let w: Vec<f64> = self.theta.iter().map(|t| (TAU - t).abs()).collect();
+        let mut out: Vec<u32> = (0..self.n)
+            .filter(|&r| high_streak[r] >= params.stall_iterations && w[r] > params.tolerance)
+            .map(|r| r as u32)
+            .collect();
+        if out.is_empty() {
+            if let Some(r) = (0..self.n).max_by(|a, b| w[*a].total_cmp(&w[*b])) {
+                if w[r] > params.tolerance {
+                    out.push(r as u32);
+                }
+            }
+        }
+        out.sort_by(|a, b| w[*b as usize].total_cmp(&w[*a as usize]));
+        out.into_iter().map(|r| self.free[r as usize]).collect()
+    }
+
+    /// Set trial_pos = pos + α δ and evaluate θ and its gradients there. Returns false when a
+    /// triangle degenerates or turns over.
+    fn try_step(
+        &mut self,
+        tris: &[[u32; 3]],
+        conn: &crate::mesh::Connectivity,
+        delta: &[[f64; 3]],
+        alpha: f64,
+    ) -> bool {
+        self.trial_pos.copy_from_slice(&self.pos);
+        for (r, &v) in self.free.iter().enumerate() {
+            let p = &mut self.trial_pos[v as usize];
+            for c in 0..3 {
+                p[c] += alpha * delta[r][c];
+            }
+        }
+        eval(
+            &self.trial_pos,
+            tris,
+            conn,
+            &self.free,
+            &self.slot_start,
+            &mut self.trial_theta,
+            &mut self.trial_grad,
+        );
+        self.trial_valid(tris)
+    }
+
+    /// No triangle touching a free vertex degenerates or turns over relative to `pos`.
+    fn trial_valid(&self, tris: &[[u32; 3]]) -> bool {
+        let tiny = 1e-12 * self.h * self.h;
+        for t in tris {
+            if t.iter().all(|&v| self.row[v as usize] == NONE) {
+                continue;
+            }
+            let p = |q: &[[f64; 3]], i: usize| q[t[i] as usize];
+            let n1 = cross(
+                sub(p(&self.trial_pos, 1), p(&self.trial_pos, 0)),
+                sub(p(&self.trial_pos, 2), p(&self.trial_pos, 0)),
+            );
+            let n0 = cross(
+                sub(p(&self.pos, 1), p(&self.pos, 0)),
+                sub(p(&self.pos, 2), p(&self.pos, 0)),
+            );
+            let a1 = dot(n1, n1).sqrt();
+            if !(a1 > tiny) || dot(n1, n0) <= 0.0 {
+                return false;
+            }
+        }
+        self.trial_theta.iter().all(|t| t.is_finite())
+    }
+
+    fn force_residual_max(
+        &mut self,
+        conn: &crate::mesh::Connectivity,
+        anchors: &[[f64; 3]],
+        lambda: &[f64],
+        params: &Params,
+        trial: bool,
+    ) -> f64 {
+        self.fill_force(conn, anchors, lambda, params, trial);
+        self.force
+            .iter()
+            .map(|f| dot(*f, *f).sqrt())
+            .fold(0.0, f64::max)
+            / self.h
+    }
+
+    /// force_r = B_p(v_r) − (Λᵀλ)_r.
+    fn fill_force(
+        &mut self,
+        conn: &crate::mesh::Connectivity,
+        anchors: &[[f64; 3]],
+        lambda: &[f64],
+        params: &Params,
+        trial: bool,
+    ) {
+        let (pos, grad) = if trial {
+            (&self.trial_pos, &self.trial_grad)
+        } else {
+            (&self.pos, &self.grad)
+        };
+        for (r, &v) in self.free.iter().enumerate() {
+            self.force[r] = b_p(pos, anchors, conn.ring_of(v), v, params);
+        }
+        for r in 0..self.n {
+            let l = lambda[r];
+            for s in self.slot_start[r]..self.slot_start[r + 1] {
+                let j = self.slot_col[s];
+                if j == NONE {
+                    continue;
+                }
+                let f = &mut self.force[j as usize];
+                for c in 0..3 {
+                    f[c] -= l * grad[s][c];
+                }
+            }
+        }
+        debug_assert_eq!(self.slot_vertex.len(), grad.len());
+    }
+}
+
+/// B_p of Eq. 8 at vertex v.
+#[inline]
+fn b_p(pos: &[[f64; 3]], anchors: &[[f64; 3]], ring: &[u32], v: u32, params: &Params) -> [f64; 3] {
+    let mut avg = [0.0; 3];
+    for &q in ring {
+        for c in 0..3 {
+            avg[c] += pos[q as usize][c];
+        }
+    }
+    let k = 1.0 / ring.len() as f64;
+    let p = pos[v as usize];
+    let a = anchors[v as usize];
+    [0, 1, 2].map(|c| -params.w1 * (p[c] - avg[c] * k) - params.w2 * (p[c] - a[c]))
+}
+
+/// θ at every free vertex and ∂θ_q/∂(q and ring) at its slots (Prop. 1, 2; same sums as
+/// `geometry::theta_gradient`, on a position slice).
+#[allow(clippy::too_many_arguments)]
+fn eval(
+    pos: &[[f64; 3]],
+    tris: &[[u32; 3]],
+    conn: &crate::mesh::Connectivity,
+    free: &[u32],
+    slot_start: &[usize],
+    theta: &mut [f64],
+    grad: &mut [[f64; 3]],
+) {
+    for (r, &q) in free.iter().enumerate() {
+        let base = slot_start[r];
+        let ring_len = slot_start[r + 1] - base - 1;
+        for g in &mut grad[base..slot_start[r + 1]] {
+            *g = [0.0; 3];
+        }
+        let pq = pos[q as usize];
+        let mut th = 0.0;
+        for (j, &hc) in conn.fan_of(q).iter().enumerate() {
+            let t = tris[hc as usize / 3];
+            let k = hc as usize % 3;
+            let pb = pos[t[(k + 1) % 3] as usize];
+            let pc = pos[t[(k + 2) % 3] as usize];
+            th += corner_angle(pq, pb, pc);
+            let (gb, gc) = corner_angle_gradient(pq, pb, pc);
+            let jb = base + 1 + j;
+            let jc = base + 1 + (j + 1) % ring_len;
+            for i in 0..3 {
+                grad[jb][i] += gb[i];
+                grad[jc][i] += gc[i];
+                grad[base][i] -= gb[i] + gc[i];
+            }
+        }
+        theta[r] = th;
+    }
+}
+
+fn mean_edge_length(mesh: &Mesh) -> f64 {
+    let e = mesh.conn().edges();
+    if e.is_empty() {
+        return 0.0;
+    }
+    let p = mesh.positions();
+    e.iter()
+        .map(|e| {
+            let d = sub(p[e[0] as usize], p[e[1] as usize]);
+            dot(d, d).sqrt()
+        })
+        .sum::<f64>()
+        / e.len() as f64
+}
+
+/// A subset of `stuck` with pairwise disjoint fans (no two adjacent), worst first.
+fn independent(mesh: &Mesh, stuck: &[u32]) -> Vec<u32> {
+    let conn = mesh.conn();
+    let mut blocked = vec![false; mesh.num_vertices()];
+    let mut out = Vec::new();
+    for &v in stuck {
+        if blocked[v as usize] || !conn.is_interior(v) {
+            continue;
+        }
+        out.push(v);
+        blocked[v as usize] = true;
+        for &p in conn.ring_of(v) {
+            blocked[p as usize] = true;
+        }
+    }
+    out
+}
+
+/// √3-style refinement of the fans of `vertices` (Kobbelt, as Sec. 2.3 suggests): every fan
+/// triangle (v, r_j, r_{j+1}) gets a centroid vertex c_j; the spokes v–r_j are flipped, leaving
+/// (r_j, r_{j+1}, c_j), (v, c_{j−1}, c_j) and (c_{j−1}, r_j, c_j). The vertices must be interior
+/// with disjoint fans. New vertices are appended; texture coordinates are dropped (their
+/// corners no longer exist).
+pub fn refine_sqrt3(mesh: &Mesh, vertices: &[u32]) -> RawMesh {
+    let mut raw = mesh.to_raw();
+    raw.uv = None;
+    let conn = mesh.conn();
+    for &v in vertices {
+        let fan = conn.fan_of(v);
+        let k = fan.len();
+        let first = raw.positions.len() as u32;
+        let mut ring = Vec::with_capacity(k);
+        for &hc in fan {
+            let f = hc as usize / 3;
+            let t = mesh.triangles()[f];
+            let i = hc as usize % 3;
+            let (a, b) = (t[(i + 1) % 3], t[(i + 2) % 3]);
+            ring.push((f, a, b));
+            let [pa, pb, pc] = mesh.face_positions(f);
+            raw.positions
+                .push([0, 1, 2].map(|c| (pa[c] + pb[c] + pc[c]) / 3.0));
+        }
+        for (j, &(f, a, b)) in ring.iter().enumerate() {
+            let cj = first + j as u32;
+            let cp = first + ((j + k - 1) % k) as u32;
+            let patch = raw.face_patch[f];
+            raw.triangles[f] = [a, b, cj];
+            raw.triangles.push([v, cp, cj]);
+            raw.face_patch.push(patch);
+            raw.triangles.push([cp, a, cj]);
+            raw.face_patch.push(patch);
+        }
+    }
+    raw
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn slice_gradient_matches_geometry() {
+        // A bumpy 5×5 grid: compare eval's gradients with geometry::theta_gradient.
+        let n = 5;
+        let mut pos = Vec::new();
+        for j in 0..=n {
+            for i in 0..=n {
+                let (x, y) = (i as f64, j as f64);
+                pos.push([
+                    x + 0.1 * (y * 1.3).sin(),
+                    y,
+                    0.3 * (x * 0.7).sin() * (y * 0.9).cos(),
+                ]);
+            }
+        }
+        let mut tri = Vec::new();
+        for j in 0..n {
+            for i in 0..n {
+                let v = (j * (n + 1) + i) as u32;
+                let w = v + n as u32 + 1;
+                tri.push([v, v + 1, w + 1]);
+                tri.push([v, w + 1, w]);
+            }
+        }
+        let raw = RawMesh {
+            positions: pos,
+            triangles: tri.clone(),
+            face_patch: vec![0; tri.len()],
+            patch_names: vec!["a".into()],
+            uv: None,
+        };
+        let mesh = Mesh::new(raw).unwrap().0;
+        let sys =
+            System::new(&mesh, &vec![false; mesh.num_vertices()], &Params::default()).unwrap();
+        let mut theta = vec![0.0; sys.n];
+        let mut grad = vec![[0.0; 3]; sys.slot_vertex.len()];
+        eval(
+            mesh.positions(),
+            mesh.triangles(),
+            mesh.conn(),
+            &sys.free,
+            &sys.slot_start,
+            &mut theta,
+            &mut grad,
+        );
+        let mut out = Vec::new();
+        for (r, &q) in sys.free.iter().enumerate() {
+            crate::geometry::theta_gradient(&mesh, q, &mut out);
+            assert!((theta[r] - crate::geometry::angle_sum_at(&mesh, q)).abs() < 1e-14);
+            for (k, (p, g)) in out.iter().enumerate() {
+                let s = sys.slot_start[r] + k;
+                assert_eq!(sys.slot_vertex[s], *p);
+                for c in 0..3 {
+                    assert!((grad[s][c] - g[c]).abs() < 1e-12);
+                }
+            }
+        }
+    }
+}
