@@ -447,9 +447,13 @@ struct System {
     rhs_t: Vec<f64>,
     force: Vec<[f64; 3]>,
     stationarity: f64,
+    /// Where the (2,2) block's diagonal starts in `values`.
+    reg_start: usize,
 }
 
 const REGULARISATION: f64 = 1e-10;
+const MAX_REFINED_PER_ROUND: usize = 64;
+const REGULARISATION_MAX: f64 = 1e2;
 /// Most tangential (fairness) movement per iteration, in mean edge lengths.
 const TANGENT_RADIUS: f64 = 0.5;
 
@@ -511,6 +515,7 @@ impl System {
             }
             slot_start.push(slot_vertex.len());
         }
+        let reg_start = values.len();
         for r in 0..n {
             entries.push((3 * n + r, 3 * n + r));
             values.push(-REGULARISATION);
@@ -549,6 +554,7 @@ impl System {
             rhs_t: vec![0.0; 4 * n],
             force: vec![[0.0; 3]; n],
             stationarity: 0.0,
+            reg_start,
         })
     }
 
@@ -575,6 +581,10 @@ impl System {
         let mut wmax_window: std::collections::VecDeque<f64> = Default::default();
         let mut high_streak = vec![0usize; n];
         let mut last_step: Option<f64> = None;
+        // Levenberg–Marquardt-like shift of the (2,2) block: small while full steps are taken,
+        // larger when the linearisation of θ fails (near-planar fans, where ∂θ → 0 and the
+        // Gauss–Newton correction blows up).
+        let mut reg = REGULARISATION;
         eval(
             &self.pos,
             tris,
@@ -665,6 +675,9 @@ impl System {
                 self.rhs[3 * n + r] = h * (TAU - self.theta[r]);
                 self.rhs_t[3 * n + r] = 0.0;
             }
+            for v in &mut self.values[self.reg_start..] {
+                *v = -reg;
+            }
             let solved = self
                 .lu
                 .factor(&self.values)
@@ -704,17 +717,38 @@ impl System {
                     } else {
                         1.0
                     };
-                    for r in 0..n {
-                        delta[r] = [0, 1, 2].map(|c| dn[r][c] + s * dt[r][c]);
-                    }
-                    // Accept the first α (1, ½, ¼, …) that lowers the violation ϖ_max by the
-                    // Armijo rule (δ_n is a Gauss–Newton step on 2π − θ, δ_t is tangent to
-                    // the constraints) or keeps it under half the tolerance.
-                    let mut best = (f64::INFINITY, params.tau);
-                    let mut alpha = 1.0;
+                    // Trials: the full normal step with the tangential one shrinking to
+                    // nothing, then shorter normal steps. Accept the first that lowers the
+                    // violation ϖ_max by the Armijo rule (δ_n is a Gauss–Newton step on
+                    // 2π − θ and δ_t is tangent to the constraints, so the violation falls
+                    // for short enough steps) or keeps it within the budget: half the
+                    // tolerance, or 1e-3 rad while `until = stationary` still has fairing to
+                    // do (the next normal steps restore it quadratically).
+                    let budget = if params.until == Until::Stationary
+                        && tan_norm > 100.0 * params.step_tolerance
+                    {
+                        1e-3f64.max(0.5 * params.tolerance)
+                    } else {
+                        0.5 * params.tolerance
+                    };
+                    const TRIALS: [(f64, f64); 9] = [
+                        (1.0, 1.0),
+                        (1.0, 0.5),
+                        (1.0, 0.25),
+                        (1.0, 0.0),
+                        (0.5, 0.0),
+                        (0.25, 0.0),
+                        (0.125, 0.0),
+                        (0.0625, 0.0),
+                        (0.015625, 0.0),
+                    ];
+                    let mut best = (f64::INFINITY, (params.tau, params.tau * s));
                     let mut accepted = None;
-                    for _ in 0..8 {
-                        let ok = self.try_step(tris, conn, &delta, alpha);
+                    for &(an, at) in &TRIALS {
+                        for r in 0..n {
+                            delta[r] = [0, 1, 2].map(|c| an * dn[r][c] + at * s * dt[r][c]);
+                        }
+                        let ok = self.try_step(tris, conn, &delta, 1.0);
                         let w = if ok {
                             self.trial_theta
                                 .iter()
@@ -724,27 +758,39 @@ impl System {
                             f64::INFINITY
                         };
                         if std::env::var_os("FLDEBUG").is_some() {
-                            eprintln!("   alpha {alpha} s {s:.3} ok {ok} w {w:e} w0 {wmax:e}");
+                            eprintln!("   an {an} at {at} s {s:.3} ok {ok} w {w:e} w0 {wmax:e}");
                         }
-                        if w <= (1.0 - 1e-4 * alpha) * wmax || w <= 0.5 * params.tolerance {
-                            accepted = Some(alpha);
+                        if w <= (1.0 - 1e-4 * an) * wmax || w <= budget {
+                            accepted = Some(an);
                             break;
                         }
                         if w < best.0 {
-                            best = (w, alpha);
+                            best = (w, (an, at * s));
                         }
-                        alpha *= 0.5;
                     }
+                    reg = if accepted == Some(1.0) {
+                        (reg * 0.1).max(REGULARISATION)
+                    } else {
+                        (reg * 10.0).min(REGULARISATION_MAX)
+                    };
                     match accepted {
                         Some(a) => a,
                         None => {
-                            let a = if best.0.is_finite() {
-                                best.1
-                            } else {
+                            // Nothing lowered the violation: take the paper's damped step
+                            // (or the least bad trial when that one degenerates).
+                            for r in 0..n {
+                                delta[r] = [0, 1, 2].map(|c| dn[r][c] + dt[r][c]);
+                            }
+                            if self.try_step(tris, conn, &delta, params.tau) {
                                 params.tau
-                            };
-                            self.try_step(tris, conn, &delta, a);
-                            a
+                            } else {
+                                let (an, at) = best.1;
+                                for r in 0..n {
+                                    delta[r] = [0, 1, 2].map(|c| an * dn[r][c] + at * dt[r][c]);
+                                }
+                                self.try_step(tris, conn, &delta, 1.0);
+                                an
+                            }
                         }
                     }
                 }
@@ -784,8 +830,10 @@ impl System {
     /// Vertices whose ϖ stayed high through the stall window, worst first; else the worst one.
     fn stuck(&self, high_streak: &[usize], params: &Params) -> Vec<u32> {
         let w: Vec<f64> = self.theta.iter().map(|t| (TAU - t).abs()).collect();
+        let wmax = w.iter().copied().fold(0.0, f64::max);
         let mut out: Vec<u32> = (0..self.n)
             .filter(|&r| high_streak[r] >= params.stall_iterations && w[r] > params.tolerance)
+            .filter(|&r| w[r] >= 0.5 * wmax)
             .map(|r| r as u32)
             .collect();
         if out.is_empty() {
@@ -796,6 +844,7 @@ impl System {
             }
         }
         out.sort_by(|a, b| w[*b as usize].total_cmp(&w[*a as usize]));
+        out.truncate(MAX_REFINED_PER_ROUND);
         out.into_iter().map(|r| self.free[r as usize]).collect()
     }
 
