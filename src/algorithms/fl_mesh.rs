@@ -775,22 +775,21 @@ impl System {
                     };
                     match accepted {
                         Some(a) => a,
-                        None => {
-                            // Nothing lowered the violation: take the paper's damped step
-                            // (or the least bad trial when that one degenerates).
+                        None if best.0.is_finite() => {
+                            let (an, at) = best.1;
                             for r in 0..n {
-                                delta[r] = [0, 1, 2].map(|c| dn[r][c] + dt[r][c]);
+                                delta[r] = [0, 1, 2].map(|c| an * dn[r][c] + at * dt[r][c]);
                             }
-                            if self.try_step(tris, conn, &delta, params.tau) {
-                                params.tau
-                            } else {
-                                let (an, at) = best.1;
-                                for r in 0..n {
-                                    delta[r] = [0, 1, 2].map(|c| an * dn[r][c] + at * dt[r][c]);
-                                }
-                                self.try_step(tris, conn, &delta, 1.0);
-                                an
-                            }
+                            self.try_step(tris, conn, &delta, 1.0);
+                            an
+                        }
+                        None => {
+                            // Every trial degenerates a triangle: stay, shift harder.
+                            reg = (reg * 100.0).min(REGULARISATION_MAX);
+                            self.trial_pos.copy_from_slice(&self.pos);
+                            self.trial_theta.copy_from_slice(&self.theta);
+                            self.trial_grad.copy_from_slice(&self.grad);
+                            0.0
                         }
                     }
                 }
