@@ -40,6 +40,9 @@
 //! by exactly the fairing that w1 and w2 ask for while every constraint stays satisfied
 //! (for a planar mesh: the solution of (w1 L + w2 I) v = w2 v⁰ in the plane).
 
+// Index loops over xyz and rows read like the equations they implement.
+#![allow(clippy::needless_range_loop)]
+
 use super::{AlgoError, Control, Outcome, Progress};
 use crate::geometry::{corner_angle, corner_angle_gradient};
 use crate::linalg::LuSolver;
@@ -892,7 +895,7 @@ impl System {
                 sub(p(&self.pos, 2), p(&self.pos, 0)),
             );
             let a1 = dot(n1, n1).sqrt();
-            if !(a1 > tiny) || dot(n1, n0) <= 0.0 {
+            if a1.is_nan() || a1 <= tiny || dot(n1, n0) <= 0.0 {
                 return false;
             }
         }
