@@ -457,6 +457,7 @@ struct System {
 const REGULARISATION: f64 = 1e-10;
 const MAX_REFINED_PER_ROUND: usize = 64;
 const REGULARISATION_MAX: f64 = 1e2;
+const REGULARISATION_START: f64 = 1e-4;
 /// Most tangential (fairness) movement per iteration, in mean edge lengths.
 const TANGENT_RADIUS: f64 = 0.5;
 
@@ -587,7 +588,7 @@ impl System {
         // Levenberg–Marquardt-like shift of the (2,2) block: small while full steps are taken,
         // larger when the linearisation of θ fails (near-planar fans, where ∂θ → 0 and the
         // Gauss–Newton correction blows up).
-        let mut reg = REGULARISATION;
+        let mut reg = REGULARISATION_START;
         eval(
             &self.pos,
             tris,
