@@ -374,3 +374,16 @@ fn sqrt3_refinement_of_a_fan() {
     let gb = geometry::patch_total_curvature(&r, 0);
     assert!((gb - 2.0 * std::f64::consts::PI * chi(&r) as f64).abs() < 1e-9);
 }
+
+/// v⁰ as the closest point on the input surface (Eq. 5's other choice) also converges.
+#[test]
+fn closest_anchor_converges() {
+    let m = load_fixture("cone_noisy");
+    let p = Params {
+        anchor: fl_mesh::Anchor::Closest,
+        ..Params::default()
+    };
+    let out = fl_mesh::run(&m, &p, &Silent::default()).unwrap();
+    assert_eq!(out.summary["converged"], serde_json::json!(true));
+    assert!(max_varpi(&out.mesh.unwrap()) <= 1e-6);
+}
