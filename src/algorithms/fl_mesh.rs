@@ -761,9 +761,6 @@ impl System {
                         } else {
                             f64::INFINITY
                         };
-                        if std::env::var_os("FLDEBUG").is_some() {
-                            eprintln!("   an {an} at {at} s {s:.3} ok {ok} w {w:e} w0 {wmax:e}");
-                        }
                         if w <= (1.0 - 1e-4 * an) * wmax || w <= budget {
                             accepted = Some(an);
                             break;
@@ -798,12 +795,6 @@ impl System {
                     }
                 }
             };
-            if std::env::var_os("FLDEBUG").is_some() {
-                eprintln!(
-                    "it {} wmax {wmax:e} step {step_norm:e} tan {tan_norm:e} alpha {alpha} stat {:e}",
-                    report.iterations, self.stationarity
-                );
-            }
             // Accept the trial state (try_step left it in trial_*); a step that degenerates a
             // triangle even at the fallback length is refused.
             if !self.trial_valid(tris) {
