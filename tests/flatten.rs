@@ -62,9 +62,9 @@ fn grid(
     (p2, tris)
 }
 
-/// Best rigid motion (rotation + translation, Kabsch in 2D) of `a` onto `b`; returns the
-/// largest distance after the fit.
-fn rigid_fit_max_error(a: &[[f64; 2]], b: &[[f64; 2]]) -> f64 {
+/// Distances of `a`'s points to `b`'s after the best rigid motion (rotation + translation,
+/// Kabsch in 2D) of `a` onto `b`.
+fn rigid_fit_distances(a: &[[f64; 2]], b: &[[f64; 2]]) -> Vec<f64> {
     let n = a.len() as f64;
     let ca = a
         .iter()
@@ -89,7 +89,12 @@ fn rigid_fit_max_error(a: &[[f64; 2]], b: &[[f64; 2]]) -> f64 {
             let y = s * p0 + c * p1 + cb[1] - q[1];
             (x * x + y * y).sqrt()
         })
-        .fold(0.0, f64::max)
+        .collect()
+}
+
+/// Largest distance after the best rigid fit of `a` onto `b`.
+fn rigid_fit_max_error(a: &[[f64; 2]], b: &[[f64; 2]]) -> f64 {
+    rigid_fit_distances(a, b).into_iter().fold(0.0, f64::max)
 }
 
 fn diameter2(p: &[[f64; 2]]) -> f64 {
@@ -457,34 +462,10 @@ fn gf_skirt_against_its_flat_pattern() {
     }
 }
 
+/// Root-mean-square distance after the best rigid fit of `a` onto `b`.
 fn rigid_fit_rms(a: &[[f64; 2]], b: &[[f64; 2]]) -> f64 {
-    let n = a.len() as f64;
-    let ca = a
-        .iter()
-        .fold([0.0, 0.0], |s, p| [s[0] + p[0] / n, s[1] + p[1] / n]);
-    let cb = b
-        .iter()
-        .fold([0.0, 0.0], |s, p| [s[0] + p[0] / n, s[1] + p[1] / n]);
-    let (mut sc, mut ss) = (0.0, 0.0);
-    for (p, q) in a.iter().zip(b) {
-        let (p0, p1) = (p[0] - ca[0], p[1] - ca[1]);
-        let (q0, q1) = (q[0] - cb[0], q[1] - cb[1]);
-        sc += p0 * q0 + p1 * q1;
-        ss += p0 * q1 - p1 * q0;
-    }
-    let th = ss.atan2(sc);
-    let (c, s) = (th.cos(), th.sin());
-    let sum: f64 = a
-        .iter()
-        .zip(b)
-        .map(|(p, q)| {
-            let (p0, p1) = (p[0] - ca[0], p[1] - ca[1]);
-            let x = c * p0 - s * p1 + cb[0] - q[0];
-            let y = s * p0 + c * p1 + cb[1] - q[1];
-            x * x + y * y
-        })
-        .sum();
-    (sum / n).sqrt()
+    let d = rigid_fit_distances(a, b);
+    (d.iter().map(|x| x * x).sum::<f64>() / d.len() as f64).sqrt()
 }
 
 /// A cylinder strip with two rectangular holes (χ = −1, three loops): developable, so its
