@@ -768,8 +768,16 @@ fn params_are_checked() {
     assert!(
         matches!(bad(r#"{"methd": "lscm"}"#), Err(algorithms::AlgoError::InvalidParam { key, .. }) if key == "methd")
     );
-    assert!(bad(r#"{"method": "abf"}"#).is_err());
-    assert!(bad(r#"{"unit": "ft"}"#).is_err());
+    // a bad value names its key even when other keys are fine
+    assert!(
+        matches!(bad(r#"{"unit": "cm", "method": "abf"}"#), Err(algorithms::AlgoError::InvalidParam { key, .. }) if key == "method")
+    );
+    assert!(
+        matches!(bad(r#"{"unit": "ft"}"#), Err(algorithms::AlgoError::InvalidParam { key, .. }) if key == "unit")
+    );
+    assert!(
+        matches!(bad(r#"{"max_iterations": "many"}"#), Err(algorithms::AlgoError::InvalidParam { key, .. }) if key == "max_iterations")
+    );
     assert!(
         matches!(bad(r#"{"tolerance": 0}"#), Err(algorithms::AlgoError::InvalidParam { key, .. }) if key == "tolerance")
     );
