@@ -214,6 +214,11 @@ fn run(kind: &str, mesh: &Path, out: &Path, sets: &[String], reference: Option<&
         }
     };
     let seconds = start.elapsed().as_secs_f64();
+    if let Some(serde_json::Value::Array(ws)) = outcome.summary.get("job_warnings") {
+        for w in ws.iter().filter_map(|w| w.as_str()) {
+            eprintln!("flatmesh: warning: {w}");
+        }
+    }
     if let Err(e) = std::fs::create_dir_all(out) {
         eprintln!("flatmesh: cannot create {}: {e}", out.display());
         return ExitCode::FAILURE;
