@@ -100,6 +100,126 @@ impl LuSolver {
     }
 }
 
+/// A symmetric quasi-definite matrix (positive definite (1,1) block, negative definite (2,2)
+/// block) factored as LDLᵀ with a fill-reducing AMD ordering computed once. Only the lower
+/// triangle of the pattern is read; `signs` gives the expected sign of each pivot (+1 for the
+/// (1,1) block, −1 for the (2,2) block) so that a pivot that comes out tiny or of the wrong
+/// sign is regularised instead of breaking the factorisation.
+pub struct LdltSolver {
+    n: usize,
+    symbolic: SymbolicSparseColMat<usize>,
+    argsort: Argsort<usize>,
+    chol: faer::sparse::linalg::cholesky::SymbolicCholesky<usize>,
+    l_values: Vec<f64>,
+    signs: Vec<i8>,
+    mem: faer::dyn_stack::MemBuffer,
+    factored: bool,
+}
+
+impl std::fmt::Debug for LdltSolver {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LdltSolver").field("n", &self.n).finish()
+    }
+}
+
+impl LdltSolver {
+    /// Pattern from `(row, col)` pairs (entries above the diagonal are ignored in the
+    /// factorisation but may be given) and the symbolic factorisation, once.
+    pub fn new(n: usize, entries: &[(usize, usize)], signs: Vec<i8>) -> Result<Self, LinalgError> {
+        use faer::sparse::linalg::cholesky::{factorize_symbolic_cholesky, SymmetricOrdering};
+        if signs.len() != n {
+            return Err(LinalgError::Pattern(format!(
+                "{} signs for dimension {n}",
+                signs.len()
+            )));
+        }
+        let pairs: Vec<Pair<usize, usize>> = entries
+            .iter()
+            .map(|&(row, col)| Pair { row, col })
+            .collect();
+        let (symbolic, argsort) = SymbolicSparseColMat::try_new_from_indices(n, n, &pairs)
+            .map_err(|e| LinalgError::Pattern(format!("{e:?}")))?;
+        let chol = factorize_symbolic_cholesky(
+            symbolic.as_ref(),
+            faer::Side::Lower,
+            SymmetricOrdering::Amd,
+            Default::default(),
+        )
+        .map_err(|e| LinalgError::Factor(format!("{e:?}")))?;
+        let par = faer::Par::Seq;
+        let req = chol
+            .factorize_numeric_ldlt_scratch::<f64>(par, Default::default())
+            .or(chol.solve_in_place_scratch::<f64>(1, par));
+        let mem = faer::dyn_stack::MemBuffer::try_new(req)
+            .map_err(|e| LinalgError::Factor(format!("{e:?}")))?;
+        let l_values = vec![0.0; chol.len_val()];
+        Ok(Self {
+            n,
+            symbolic,
+            argsort,
+            chol,
+            l_values,
+            signs,
+            mem,
+            factored: false,
+        })
+    }
+
+    /// Numeric LDLᵀ of the matrix with `values[k]` at `entries[k]`.
+    pub fn factor(&mut self, values: &[f64]) -> Result<(), LinalgError> {
+        use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
+        if values.iter().any(|v| !v.is_finite()) {
+            return Err(LinalgError::NonFinite);
+        }
+        let a = SparseColMat::new_from_argsort(self.symbolic.clone(), &self.argsort, values)
+            .map_err(|e| LinalgError::Factor(format!("{e:?}")))?;
+        let reg = LdltRegularization {
+            dynamic_regularization_signs: Some(&self.signs),
+            dynamic_regularization_delta: 1e-10,
+            dynamic_regularization_epsilon: 1e-14,
+        };
+        let stack = faer::dyn_stack::MemStack::new(&mut self.mem);
+        self.chol
+            .factorize_numeric_ldlt(
+                &mut self.l_values,
+                a.as_ref(),
+                faer::Side::Lower,
+                reg,
+                faer::Par::Seq,
+                stack,
+                Default::default(),
+            )
+            .map_err(|e| LinalgError::Factor(format!("{e:?}")))?;
+        self.factored = true;
+        Ok(())
+    }
+
+    /// Solve in place with the last factorisation.
+    pub fn solve_in_place(&mut self, rhs: &mut [f64]) -> Result<(), LinalgError> {
+        if !self.factored {
+            return Err(LinalgError::Factor("solve before factor".into()));
+        }
+        if rhs.len() != self.n {
+            return Err(LinalgError::Pattern(format!(
+                "right-hand side of length {} for dimension {}",
+                rhs.len(),
+                self.n
+            )));
+        }
+        let ldlt = faer::sparse::linalg::cholesky::LdltRef::<'_, usize, f64>::new(
+            &self.chol,
+            &self.l_values,
+        );
+        let m = faer::MatMut::from_column_major_slice_mut(rhs, self.n, 1);
+        let stack = faer::dyn_stack::MemStack::new(&mut self.mem);
+        ldlt.solve_in_place_with_conj(faer::Conj::No, m, faer::Par::Seq, stack);
+        if rhs.iter().any(|v| !v.is_finite()) {
+            return Err(LinalgError::NonFinite);
+        }
+        Ok(())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

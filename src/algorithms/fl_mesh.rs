@@ -45,7 +45,7 @@
 
 use super::{AlgoError, Control, Outcome, Progress};
 use crate::geometry::{corner_angle, corner_angle_gradient};
-use crate::linalg::LuSolver;
+use crate::linalg::{LdltSolver, LinalgError, LuSolver};
 use crate::mesh::{cross, dot, sub, Mesh, RawMesh, VertexKind, NONE};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
@@ -85,6 +85,19 @@ pub enum Until {
     Stationary,
 }
 
+/// Which factorisation solves Eq. 7.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LinearSolver {
+    /// Sparse LU of Eq. 7 exactly as printed (H of Eq. 10 is not symmetric).
+    Lu,
+    /// Sparse LDLᵀ of Eq. 7 with H symmetrised as (w1 + w2) I − w1 D^{-1/2} A D^{-1/2}
+    /// (similar to Eq. 10's H, identical on valence-regular meshes). The fixed point, and so
+    /// the result's meaning, is unchanged: B_p and B_λ are the paper's; only the path differs.
+    #[default]
+    Ldlt,
+}
+
 /// Parameters of `fl-mesh`.
 #[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
@@ -113,6 +126,8 @@ pub struct Params {
     pub max_refinements: usize,
     /// Iterations without ϖ_max halving that count as a stall.
     pub stall_iterations: usize,
+    /// `ldlt` (default) or `lu`.
+    pub linear_solver: LinearSolver,
 }
 
 impl Default for Params {
@@ -130,6 +145,7 @@ impl Default for Params {
             refine: true,
             max_refinements: 3,
             stall_iterations: 8,
+            linear_solver: LinearSolver::Ldlt,
         }
     }
 }
@@ -434,7 +450,7 @@ struct System {
     /// Where Λ's six values of a slot start in `values` (NONE when the column is fixed).
     slot_value: Vec<u32>,
     values: Vec<f64>,
-    lu: LuSolver,
+    lu: Factor,
     /// Mean edge length: the length scale.
     h: f64,
     /// Current positions (all vertices).
@@ -480,7 +496,7 @@ impl System {
         // H ⊗ I3 (Eq. 10): constant.
         for (r, &v) in free.iter().enumerate() {
             let ring = conn.ring_of(v);
-            let off = -params.w1 / ring.len() as f64;
+            let di = ring.len() as f64;
             for c in 0..3 {
                 entries.push((c * n + r, c * n + r));
                 values.push(params.w1 + params.w2);
@@ -488,7 +504,12 @@ impl System {
                     let j = row[p as usize];
                     if j != NONE {
                         entries.push((c * n + r, c * n + j as usize));
-                        values.push(off);
+                        values.push(match params.linear_solver {
+                            LinearSolver::Lu => -params.w1 / di,
+                            LinearSolver::Ldlt => {
+                                -params.w1 / (di * conn.ring_of(p).len() as f64).sqrt()
+                            }
+                        });
                     }
                 }
             }
@@ -530,11 +551,15 @@ impl System {
                 "mesh has no edge of positive length".into(),
             ));
         }
-        let lu = if n > 0 {
-            LuSolver::new(4 * n, &entries)
-                .map_err(|e| AlgoError::Input(format!("KKT system: {e}")))?
-        } else {
-            LuSolver::new(0, &[]).map_err(|e| AlgoError::Input(format!("KKT system: {e}")))?
+        let kkt = |e: crate::linalg::LinalgError| AlgoError::Input(format!("KKT system: {e}"));
+        let lu = match params.linear_solver {
+            LinearSolver::Lu => Factor::Lu(LuSolver::new(4 * n, &entries).map_err(kkt)?),
+            LinearSolver::Ldlt => {
+                let signs = (0..4 * n).map(|i| if i < 3 * n { 1 } else { -1 }).collect();
+                Factor::Ldlt(Box::new(
+                    LdltSolver::new(4 * n, &entries, signs).map_err(kkt)?,
+                ))
+            }
         };
         let ns = slot_vertex.len();
         Ok(System {
@@ -723,7 +748,7 @@ impl System {
                     };
                     // Trials: the full normal step with the tangential one shrinking to
                     // nothing, then shorter normal steps. Accept the first that lowers the
-                    // violation ϖ_max by the Armijo rule (δ_n is a Gauss–Newton step on
+                    // violation ‖2π − θ‖₂ by the Armijo rule (δ_n is a Gauss–Newton step on
                     // 2π − θ and δ_t is tangent to the constraints, so the violation falls
                     // for short enough steps) or keeps it within the budget: half the
                     // tolerance, or 1e-3 rad while `until = stationary` still has fairing to
@@ -747,21 +772,28 @@ impl System {
                         (0.015625, 0.0),
                     ];
                     let mut best = (f64::INFINITY, (params.tau, params.tau * s));
+                    let c2_0 = self
+                        .theta
+                        .iter()
+                        .map(|t| (TAU - t) * (TAU - t))
+                        .sum::<f64>()
+                        .sqrt();
                     let mut accepted = None;
                     for &(an, at) in &TRIALS {
                         for r in 0..n {
                             delta[r] = [0, 1, 2].map(|c| an * dn[r][c] + at * s * dt[r][c]);
                         }
                         let ok = self.try_step(tris, conn, &delta, 1.0);
-                        let w = if ok {
-                            self.trial_theta
-                                .iter()
-                                .map(|t| (TAU - t).abs())
-                                .fold(0.0, f64::max)
+                        let (w, c2) = if ok {
+                            self.trial_theta.iter().fold((0.0f64, 0.0f64), |(m, q), t| {
+                                let d = (TAU - t).abs();
+                                (m.max(d), q + d * d)
+                            })
                         } else {
-                            f64::INFINITY
+                            (f64::INFINITY, f64::INFINITY)
                         };
-                        if w <= (1.0 - 1e-4 * an) * wmax || w <= budget {
+                        let c2 = c2.sqrt();
+                        if c2 <= (1.0 - 1e-4 * an) * c2_0 || w <= budget {
                             accepted = Some(an);
                             break;
                         }
@@ -941,6 +973,26 @@ impl System {
             }
         }
         debug_assert_eq!(self.slot_vertex.len(), grad.len());
+    }
+}
+
+enum Factor {
+    Lu(LuSolver),
+    Ldlt(Box<LdltSolver>),
+}
+
+impl Factor {
+    fn factor(&mut self, values: &[f64]) -> Result<(), LinalgError> {
+        match self {
+            Factor::Lu(s) => s.factor(values),
+            Factor::Ldlt(s) => s.factor(values),
+        }
+    }
+    fn solve_in_place(&mut self, rhs: &mut [f64]) -> Result<(), LinalgError> {
+        match self {
+            Factor::Lu(s) => s.solve_in_place(rhs),
+            Factor::Ldlt(s) => s.solve_in_place(rhs),
+        }
     }
 }
 
