@@ -262,4 +262,37 @@ mod tests {
             assert!((2.0 * b[i] - x[i]).abs() < 1e-12);
         }
     }
+
+    #[test]
+    fn ldlt_solves_quasi_definite_kkt_and_refactors() {
+        // [[4, 1, 1], [1, 3, 2], [1, 2, -1]]: SPD (1,1) block, negative (2,2) block; the
+        // upper triangle is given too and ignored.
+        let entries = [
+            (0, 0),
+            (1, 0),
+            (1, 1),
+            (2, 0),
+            (2, 1),
+            (2, 2),
+            (0, 1),
+            (0, 2),
+            (1, 2),
+        ];
+        let vals = [4.0, 1.0, 3.0, 1.0, 2.0, -1.0, 1.0, 1.0, 2.0];
+        let mut s = LdltSolver::new(3, &entries, vec![1, 1, -1]).unwrap();
+        let x = [0.5, -1.0, 2.0];
+        for scale in [1.0, 3.0] {
+            let v: Vec<f64> = vals.iter().map(|v| v * scale).collect();
+            s.factor(&v).unwrap();
+            let mut b = [
+                4.0 * x[0] + x[1] + x[2],
+                x[0] + 3.0 * x[1] + 2.0 * x[2],
+                x[0] + 2.0 * x[1] - x[2],
+            ];
+            s.solve_in_place(&mut b).unwrap();
+            for i in 0..3 {
+                assert!((scale * b[i] - x[i]).abs() < 1e-12, "{b:?}");
+            }
+        }
+    }
 }
