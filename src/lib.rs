@@ -12,3 +12,4 @@ pub mod io;
 pub mod mesh;
 pub mod pattern;
 pub mod report;
+pub mod service;
