@@ -126,89 +126,128 @@ fn main() {
             }
             tokio::time::sleep(Duration::from_millis(20)).await;
         }
-        let start = Instant::now();
-        let end = start + Duration::from_secs(seconds as u64);
-        let mut tasks = vec![];
-        for k in 0..clients {
-            let c = c.clone();
-            let base = base.clone();
-            let poll_id = slow_ids[k % workers].clone();
-            let small = small.clone();
-            tasks.push(tokio::spawn(async move {
-                let (mut polls, mut submits, mut errors) = (vec![], vec![], 0usize);
-                let mut i = 0usize;
-                while Instant::now() < end {
-                    i += 1;
-                    let t = Instant::now();
-                    // one submit for every 10 polls
-                    if i % 10 == 0 {
-                        let r = c
-                            .post(format!("{base}/v1/jobs"))
-                            .json(&json!({"kind": "report", "mesh_id": small}))
-                            .send()
-                            .await;
-                        match r {
-                            Ok(r) if r.status() == 202 => {
-                                let _ = r.bytes().await;
-                                submits.push(t.elapsed().as_secs_f64() * 1e3)
-                            }
-                            _ => errors += 1,
-                        }
-                    } else {
-                        let r = c.get(format!("{base}/v1/jobs/{poll_id}")).send().await;
-                        match r {
-                            Ok(r) if r.status() == 200 => {
-                                let _ = r.bytes().await;
-                                polls.push(t.elapsed().as_secs_f64() * 1e3)
-                            }
-                            _ => errors += 1,
-                        }
-                    }
-                }
-                (polls, submits, errors)
-            }));
+        for (label, interval_ms) in [("paced", env("INTERVAL_MS", 20)), ("closed-loop", 0)] {
+            phase(
+                &c,
+                &base,
+                label,
+                clients,
+                seconds,
+                interval_ms,
+                workers,
+                &slow_ids,
+                &small,
+            )
+            .await;
         }
-        let (mut polls, mut submits, mut errors) = (vec![], vec![], 0);
-        for t in tasks {
-            let (p, s, e) = t.await.unwrap();
-            polls.extend(p);
-            submits.extend(s);
-            errors += e;
-        }
-        let elapsed = start.elapsed().as_secs_f64();
-        let v: Value = c
-            .get(format!("{base}/readyz"))
-            .send()
-            .await
-            .unwrap()
-            .json()
-            .await
-            .unwrap();
-        let total = polls.len() + submits.len();
-        println!(
-            "service_load: {clients} clients, {elapsed:.1} s, {workers} workers busy (running at end: {})",
-            v["running"]
-        );
-        println!(
-            "  status polls: n={} p50={:.2} ms p99={:.2} ms max={:.2} ms",
-            polls.len(),
-            pct(&mut polls, 0.5),
-            pct(&mut polls, 0.99),
-            pct(&mut polls, 1.0)
-        );
-        println!(
-            "  submits:      n={} p50={:.2} ms p99={:.2} ms max={:.2} ms",
-            submits.len(),
-            pct(&mut submits, 0.5),
-            pct(&mut submits, 0.99),
-            pct(&mut submits, 1.0)
-        );
-        println!(
-            "  throughput:   {:.0} requests/s, errors {errors}",
-            total as f64 / elapsed
-        );
     });
     let _ = child.kill();
     let _ = child.wait();
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// One measuring phase: `clients` tasks, each polling a running job's status and submitting a
+/// small job every tenth request, every `interval_ms` (0: as fast as answers come back).
+#[allow(clippy::too_many_arguments)]
+async fn phase(
+    c: &reqwest::Client,
+    base: &str,
+    label: &str,
+    clients: usize,
+    seconds: usize,
+    interval_ms: usize,
+    workers: usize,
+    slow_ids: &[String],
+    small: &str,
+) {
+    let start = Instant::now();
+    let end = start + Duration::from_secs(seconds as u64);
+    let mut tasks = vec![];
+    for k in 0..clients {
+        let c = c.clone();
+        let base = base.to_string();
+        let poll_id = slow_ids[k % workers].clone();
+        let small = small.to_string();
+        tasks.push(tokio::spawn(async move {
+            let (mut polls, mut submits, mut errors) = (vec![], vec![], 0usize);
+            let mut i = 0usize;
+            let mut tick = (interval_ms > 0).then(|| {
+                let mut t = tokio::time::interval(Duration::from_millis(interval_ms as u64));
+                t.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+                t
+            });
+            while Instant::now() < end {
+                if let Some(t) = tick.as_mut() {
+                    t.tick().await;
+                }
+                i += 1;
+                let t = Instant::now();
+                // one submit for every 10 polls
+                if i % 10 == 0 {
+                    let r = c
+                        .post(format!("{base}/v1/jobs"))
+                        .json(&json!({"kind": "report", "mesh_id": small}))
+                        .send()
+                        .await;
+                    match r {
+                        Ok(r) if r.status() == 202 => {
+                            let _ = r.bytes().await;
+                            submits.push(t.elapsed().as_secs_f64() * 1e3)
+                        }
+                        _ => errors += 1,
+                    }
+                } else {
+                    let r = c.get(format!("{base}/v1/jobs/{poll_id}")).send().await;
+                    match r {
+                        Ok(r) if r.status() == 200 => {
+                            let _ = r.bytes().await;
+                            polls.push(t.elapsed().as_secs_f64() * 1e3)
+                        }
+                        _ => errors += 1,
+                    }
+                }
+            }
+            (polls, submits, errors)
+        }));
+    }
+    let (mut polls, mut submits, mut errors) = (vec![], vec![], 0);
+    for t in tasks {
+        let (p, s, e) = t.await.unwrap();
+        polls.extend(p);
+        submits.extend(s);
+        errors += e;
+    }
+    let elapsed = start.elapsed().as_secs_f64();
+    let v: Value = c
+        .get(format!("{base}/readyz"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    let total = polls.len() + submits.len();
+    println!(
+        "service_load [{label}{}]: {clients} clients, {elapsed:.1} s, {workers} workers busy (running at end: {})",
+        if interval_ms > 0 { format!(", one request per client every {interval_ms} ms") } else { String::new() },
+        v["running"]
+    );
+    println!(
+        "  status polls: n={} p50={:.2} ms p99={:.2} ms max={:.2} ms",
+        polls.len(),
+        pct(&mut polls, 0.5),
+        pct(&mut polls, 0.99),
+        pct(&mut polls, 1.0)
+    );
+    println!(
+        "  submits:      n={} p50={:.2} ms p99={:.2} ms max={:.2} ms",
+        submits.len(),
+        pct(&mut submits, 0.5),
+        pct(&mut submits, 0.99),
+        pct(&mut submits, 1.0)
+    );
+    println!(
+        "  throughput:   {:.0} requests/s, errors {errors}",
+        total as f64 / elapsed
+    );
 }

@@ -92,6 +92,18 @@ impl Control for JobControl<'_> {
     }
 }
 
+#[cfg(target_os = "linux")]
+fn lower_priority() {
+    // SAFETY: plain syscalls on the calling thread; failure leaves the priority unchanged.
+    unsafe {
+        let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
+        libc::setpriority(libc::PRIO_PROCESS, tid, 10);
+    }
+}
+
+#[cfg(not(target_os = "linux"))]
+fn lower_priority() {}
+
 fn panic_message(p: &(dyn std::any::Any + Send)) -> String {
     if let Some(s) = p.downcast_ref::<&str>() {
         s.to_string()
@@ -113,6 +125,9 @@ impl Executor {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(limits.workers.max(1))
             .thread_name(|i| format!("flatmesh-worker-{i}"))
+            // Jobs yield the CPU to the HTTP threads, so that status polls stay fast while
+            // every worker is busy (Linux: setpriority on a thread id sets that thread only).
+            .start_handler(|_| lower_priority())
             .build()
             .map_err(std::io::Error::other)?;
         Ok(Arc::new(Executor {

@@ -186,9 +186,15 @@ pub trait Store: Send + Sync {
 
 /// SQLite index (`flatmesh.sqlite3`, WAL) plus blob files under the data directory.
 pub struct SqliteStore {
+    /// The one writer.
     conn: Mutex<Connection>,
+    /// Readers (WAL lets them read while the writer writes), taken round robin.
+    readers: Vec<Mutex<Connection>>,
+    next_reader: std::sync::atomic::AtomicUsize,
     dir: PathBuf,
 }
+
+const READERS: usize = 4;
 
 const SCHEMA: &str = "
 CREATE TABLE IF NOT EXISTS meshes (
@@ -285,14 +291,40 @@ impl SqliteStore {
         conn.pragma_update(None, "synchronous", "NORMAL")?;
         conn.busy_timeout(std::time::Duration::from_secs(5))?;
         conn.execute_batch(SCHEMA)?;
+        let mut readers = Vec::with_capacity(READERS);
+        for _ in 0..READERS {
+            let r = Connection::open_with_flags(
+                dir.join("flatmesh.sqlite3"),
+                rusqlite::OpenFlags::SQLITE_OPEN_READ_ONLY
+                    | rusqlite::OpenFlags::SQLITE_OPEN_NO_MUTEX,
+            )?;
+            r.busy_timeout(std::time::Duration::from_secs(5))?;
+            readers.push(Mutex::new(r));
+        }
         Ok(SqliteStore {
             conn: Mutex::new(conn),
+            readers,
+            next_reader: std::sync::atomic::AtomicUsize::new(0),
             dir: dir.to_path_buf(),
         })
     }
 
     fn conn(&self) -> std::sync::MutexGuard<'_, Connection> {
         self.conn.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// A read connection: a free one if any, else the next in turn.
+    fn reader(&self) -> std::sync::MutexGuard<'_, Connection> {
+        for r in &self.readers {
+            if let Ok(g) = r.try_lock() {
+                return g;
+            }
+        }
+        let i = self
+            .next_reader
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+            % self.readers.len();
+        self.readers[i].lock().unwrap_or_else(|e| e.into_inner())
     }
 
     fn blob_path(&self, key: &str) -> PathBuf {
@@ -317,7 +349,7 @@ impl SqliteStore {
         args: &[&dyn rusqlite::ToSql],
         tail: &str,
     ) -> Result<Vec<JobRecord>, StoreError> {
-        let c = self.conn();
+        let c = self.reader();
         let mut st = c.prepare_cached(&format!(
             "SELECT {JOB_COLS} FROM jobs WHERE {sql_where} {tail}"
         ))?;
@@ -341,7 +373,7 @@ impl Store for SqliteStore {
     }
 
     fn get_mesh(&self, id: &str) -> Result<Option<MeshRecord>, StoreError> {
-        let c = self.conn();
+        let c = self.reader();
         let mut st = c.prepare_cached(
             "SELECT id, created_at, format, size, sha256, summary FROM meshes WHERE id = ?1",
         )?;
