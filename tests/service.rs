@@ -1213,3 +1213,175 @@ async fn webhook_is_signed_and_delivered() {
     check("Job", &v["data"]);
     assert_eq!(v["data"]["id"], j["id"]);
 }
+
+fn flatmesh_client(base: &str, args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_flatmesh"))
+        .args(["client", "--server", base])
+        .args(args)
+        .env_remove("FLATMESH_API_KEY")
+        .output()
+        .unwrap();
+    (
+        out.status.success(),
+        String::from_utf8(out.stdout).unwrap(),
+        String::from_utf8(out.stderr).unwrap(),
+    )
+}
+
+/// `flatmesh client` against the real server: upload, submit (by id and multipart), wait,
+/// download, health.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn client_commands() {
+    let s = Server::start(&tmp("client"), &[]);
+    let c = client();
+    let base = s.base.clone();
+    let (ok, out, err) = flatmesh_client(&base, &["upload", "fixtures/cylinder.obj"]);
+    assert!(ok, "{err}");
+    let m: Value = serde_json::from_str(&out).unwrap();
+    check("Mesh", &m);
+    let mid = m["id"].as_str().unwrap();
+    let (ok, out, err) = flatmesh_client(
+        &base,
+        &[
+            "submit",
+            "flatten",
+            "--mesh-id",
+            mid,
+            "--set",
+            "unit=cm",
+            "--idempotency-key",
+            "k",
+        ],
+    );
+    assert!(ok, "{err}");
+    let j: Value = serde_json::from_str(&out).unwrap();
+    check("Job", &j);
+    assert_eq!(j["params"]["unit"], "cm");
+    let id = j["id"].as_str().unwrap();
+    let (ok, out, err) = flatmesh_client(&base, &["wait", id, "--timeout", "60"]);
+    assert!(ok, "{err}");
+    let done: Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(done["status"], "succeeded");
+    assert!(err.contains(id), "progress lines on stderr: {err}");
+    let dir = tmp("client-out");
+    std::fs::create_dir_all(&dir).unwrap();
+    for (what, format) in [("patterns", "dxf"), ("mesh", "obj"), ("result", "")] {
+        let out_file = dir.join(format!("{what}.{format}"));
+        let mut args = vec![
+            "download",
+            id,
+            "--what",
+            what,
+            "--out",
+            out_file.to_str().unwrap(),
+        ];
+        if !format.is_empty() {
+            args.extend(["--format", format]);
+        }
+        let (ok, _, err) = flatmesh_client(&base, &args);
+        assert!(ok, "{err}");
+        let path = match what {
+            "result" => format!("/v1/jobs/{id}/result"),
+            _ => format!("/v1/jobs/{id}/{what}?format={format}"),
+        };
+        let want = c
+            .get(s.url(&path))
+            .send()
+            .await
+            .unwrap()
+            .bytes()
+            .await
+            .unwrap();
+        assert_eq!(std::fs::read(&out_file).unwrap(), want.to_vec(), "{what}");
+    }
+    // multipart submit with a file, and a refused parameter reported with its field
+    let (ok, out, err) =
+        flatmesh_client(&base, &["submit", "report", "--mesh", "fixtures/cone.obj"]);
+    assert!(ok, "{err}");
+    let j: Value = serde_json::from_str(&out).unwrap();
+    let (ok, _, err) = flatmesh_client(&base, &["wait", j["id"].as_str().unwrap()]);
+    assert!(ok, "{err}");
+    let (ok, _, err) = flatmesh_client(
+        &base,
+        &[
+            "submit",
+            "flatten",
+            "--mesh-id",
+            mid,
+            "--set",
+            "tolerance=7",
+        ],
+    );
+    assert!(!ok);
+    assert!(
+        err.contains("422") && err.contains("params.tolerance"),
+        "{err}"
+    );
+    let (ok, _, _) = flatmesh_client(&base, &["health"]);
+    assert!(ok);
+    drop(s);
+    let (ok, _, _) = flatmesh_client(&base, &["health"]);
+    assert!(!ok, "health fails when the server is gone");
+}
+
+/// Results expire after the retention; CORS and gzip are applied.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn retention_cors_compression() {
+    let s = Server::start(
+        &tmp("retention"),
+        &["--retention", "1s", "--cors-origin", "https://cad.example"],
+    );
+    let c = client();
+    let m = upload(&c, &s, fixture("cone")).await;
+    let j = submit(&c, &s, json!({"kind": "report", "mesh_id": m["id"]})).await;
+    let id = j["id"].as_str().unwrap();
+    let done = wait_for(&c, &s, id, &["succeeded"]).await;
+    assert!(done["expires_at"].is_string());
+    let t = Instant::now();
+    loop {
+        let r = c
+            .get(s.url(&format!("/v1/jobs/{id}")))
+            .send()
+            .await
+            .unwrap();
+        if r.status() == 404 {
+            break;
+        }
+        assert!(t.elapsed() < Duration::from_secs(10), "job not expired");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    assert!(
+        !s.dir.join(format!("blobs/jobs/{id}")).exists(),
+        "artifacts deleted"
+    );
+    let r = c
+        .get(s.url("/v1/jobs"))
+        .header("origin", "https://cad.example")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(
+        r.headers()["access-control-allow-origin"],
+        "https://cad.example"
+    );
+    let r = c
+        .get(s.url("/v1/jobs"))
+        .header("origin", "https://evil.example")
+        .send()
+        .await
+        .unwrap();
+    assert!(!r.headers().contains_key("access-control-allow-origin"));
+    let r = c
+        .get(s.url("/openapi.yaml"))
+        .header("accept-encoding", "gzip")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.headers()["content-encoding"], "gzip");
+    let gz = r.bytes().await.unwrap();
+    assert!(gz.len() < openapi_len(), "compressed {} bytes", gz.len());
+}
+
+fn openapi_len() -> usize {
+    std::fs::metadata("src/service/openapi.yaml").unwrap().len() as usize
+}

@@ -47,9 +47,18 @@ pub struct Live {
     pub progress: Mutex<Option<serde_json::Value>>,
 }
 
+/// The function that runs a job ([`algorithms::run`]; tests substitute their own).
+pub type Runner = fn(
+    &str,
+    &algorithms::Input,
+    &serde_json::Map<String, serde_json::Value>,
+    &dyn Control,
+) -> Result<algorithms::Outcome, AlgoError>;
+
 /// Runs jobs.
 pub struct Executor {
     pool: rayon::ThreadPool,
+    runner: Runner,
     store: Arc<dyn Store>,
     live: Mutex<HashMap<String, Arc<Live>>>,
     /// Serialises status transitions between handlers (cancel) and workers.
@@ -122,6 +131,17 @@ impl Executor {
         metrics: Arc<Metrics>,
         webhooks: Arc<Webhooks>,
     ) -> std::io::Result<Arc<Executor>> {
+        Executor::with_runner(store, limits, metrics, webhooks, algorithms::run)
+    }
+
+    /// As [`Executor::new`], running jobs with `runner`.
+    pub fn with_runner(
+        store: Arc<dyn Store>,
+        limits: Limits,
+        metrics: Arc<Metrics>,
+        webhooks: Arc<Webhooks>,
+        runner: Runner,
+    ) -> std::io::Result<Arc<Executor>> {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(limits.workers.max(1))
             .thread_name(|i| format!("flatmesh-worker-{i}"))
@@ -132,6 +152,7 @@ impl Executor {
             .map_err(std::io::Error::other)?;
         Ok(Arc::new(Executor {
             pool,
+            runner,
             store,
             live: Mutex::new(HashMap::new()),
             transition: Mutex::new(()),
@@ -403,7 +424,7 @@ impl Executor {
         let input = algorithms::Input { mesh, reference };
         let start = Instant::now();
         let outcome =
-            algorithms::run(&job.kind, &input, &job.params, control).map_err(ExecError::Algo)?;
+            (self.runner)(&job.kind, &input, &job.params, control).map_err(ExecError::Algo)?;
         let seconds = start.elapsed().as_secs_f64();
         let mut names = Vec::new();
         let artifacts = io::artifacts::render(&input.mesh, &outcome, &warnings, seconds);
@@ -474,4 +495,119 @@ impl Executor {
 enum ExecError {
     Algo(AlgoError),
     Input(Problem),
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::service::store::{SqliteStore, Store};
+
+    fn runner(
+        kind: &str,
+        input: &algorithms::Input,
+        params: &serde_json::Map<String, serde_json::Value>,
+        control: &dyn Control,
+    ) -> Result<algorithms::Outcome, AlgoError> {
+        if params.contains_key("boom") {
+            panic!("index out of bounds: the len is 3 but the index is 7");
+        }
+        algorithms::run(kind, input, params, control)
+    }
+
+    fn job(id: &str, mesh_id: &str, boom: bool) -> JobRecord {
+        let mut params = serde_json::Map::new();
+        if boom {
+            params.insert("boom".into(), serde_json::json!(true));
+        }
+        JobRecord {
+            seq: 0,
+            id: id.into(),
+            kind: "report".into(),
+            mesh_id: mesh_id.into(),
+            reference_mesh_id: None,
+            params,
+            callback_url: None,
+            status: Status::Queued,
+            progress: None,
+            error: None,
+            created_at: now_ms(),
+            started_at: None,
+            finished_at: None,
+            expires_at: None,
+            attempts: 0,
+            artifacts: vec![],
+            idempotency_key: None,
+            request_hash: None,
+        }
+    }
+
+    fn wait_end(store: &dyn Store, id: &str) -> JobRecord {
+        let t = Instant::now();
+        loop {
+            let j = store.get_job(id).unwrap().unwrap();
+            if j.status.is_terminal() {
+                return j;
+            }
+            assert!(
+                t.elapsed() < Duration::from_secs(30),
+                "job {id} did not end"
+            );
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+
+    /// A panic inside an algorithm fails that job with a 500 problem; the pool keeps working.
+    #[test]
+    fn panic_fails_the_job_and_the_pool_survives() {
+        let dir = std::env::temp_dir().join(format!("flatmesh-exec-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let store: Arc<dyn Store> = Arc::new(SqliteStore::open(&dir).unwrap());
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .build()
+            .unwrap();
+        let metrics = Arc::new(Metrics::default());
+        let hooks = Arc::new(Webhooks::new(
+            vec![1; 32],
+            false,
+            rt.handle().clone(),
+            metrics.clone(),
+        ));
+        let limits = Limits {
+            workers: 1,
+            max_queued: 4,
+            time_limit: Duration::from_secs(60),
+            retention: Duration::from_secs(60),
+            max_attempts: 3,
+        };
+        let exec = Executor::with_runner(store.clone(), limits, metrics, hooks, runner).unwrap();
+        let obj = std::fs::read("fixtures/flat_disk.obj").unwrap();
+        store.put_blob("meshes/m1", &obj).unwrap();
+        store
+            .insert_mesh(&crate::service::store::MeshRecord {
+                id: "m1".into(),
+                created_at: 0,
+                format: "obj".into(),
+                size: obj.len() as u64,
+                sha256: String::new(),
+                summary: serde_json::json!({}),
+            })
+            .unwrap();
+        for (id, boom) in [("j1", true), ("j2", false)] {
+            store.insert_job(&job(id, "m1", boom)).unwrap();
+            assert!(exec.reserve());
+            exec.enqueue(id.into(), true);
+        }
+        let j1 = wait_end(store.as_ref(), "j1");
+        assert_eq!(j1.status, Status::Failed);
+        let e = j1.error.unwrap();
+        assert_eq!(e.status, 500);
+        assert!(e.detail.contains("index out of bounds"), "{}", e.detail);
+        assert!(j1.artifacts.is_empty());
+        let j2 = wait_end(store.as_ref(), "j2");
+        assert_eq!(j2.status, Status::Succeeded, "{:?}", j2.error);
+        assert!(j2.artifacts.iter().any(|a| a == "report.json"));
+        assert_eq!(exec.running(), 0);
+        assert_eq!(exec.queued(), 0);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

@@ -385,10 +385,11 @@ async fn serve_async(cfg: Config) -> Result<(), String> {
                 .collect(),
         ),
     };
-    // Expired results go once a minute.
+    // Expired results go at a quarter of the retention, at most once a minute.
     let sweeper = exec.clone();
+    let every = (cfg.retention / 4).clamp(Duration::from_millis(200), Duration::from_secs(60));
     tokio::spawn(async move {
-        let mut tick = tokio::time::interval(Duration::from_secs(60));
+        let mut tick = tokio::time::interval(every);
         loop {
             tick.tick().await;
             let ex = sweeper.clone();
