@@ -35,8 +35,13 @@ enum Command {
     /// Run a job locally, without a server, and write its results into DIR.
     ///
     /// DIR receives report.json (the flattenability report of the output mesh plus the job's
-    /// own figures), mesh.glb and mesh.obj. Progress goes to stderr. Exit status: 0 on
-    /// success, 2 for invalid input or parameters, 1 on other failures.
+    /// own figures), mesh.glb and mesh.obj; `flatten` also writes patterns.json,
+    /// patterns.svg and patterns.dxf. Progress goes to stderr. Exit status: 0 on success, 2
+    /// for invalid input or parameters, 1 on other failures.
+    ///
+    /// flatten parameters: method=lpfb|lscm (lpfb), unit=mm|cm|m|in (drawing unit, mm),
+    /// input_unit=mm|cm|m|in (the mesh's unit, m), max_iterations (200), tolerance (1e-5),
+    /// svg_triangles=true|false (false).
     Run {
         /// Job kind.
         #[arg(value_parser = clap::builder::PossibleValuesParser::new(algorithms::KINDS))]
@@ -227,6 +232,11 @@ fn run(kind: &str, mesh: &Path, out: &Path, sets: &[String], reference: Option<&
         }
     };
     let seconds = start.elapsed().as_secs_f64();
+    if let Some(serde_json::Value::Array(ws)) = outcome.summary.get("job_warnings") {
+        for w in ws.iter().filter_map(|w| w.as_str()) {
+            eprintln!("flatmesh: warning: {w}");
+        }
+    }
     if let Err(e) = std::fs::create_dir_all(out) {
         eprintln!("flatmesh: cannot create {}: {e}", out.display());
         return ExitCode::FAILURE;

@@ -181,11 +181,7 @@ fn gauss_bonnet_holds_per_mesh_and_per_patch() {
         );
         let mesh = load(&f);
         for (p, _) in f.mesh.patch_names.iter().enumerate() {
-            let faces: Vec<usize> = all
-                .iter()
-                .copied()
-                .filter(|&t| f.mesh.face_patch[t] == p as u32)
-                .collect();
+            let faces = patch_faces(&f.mesh, p);
             let cp = count(&f.mesh, &faces);
             let kp = total_curvature(&cp);
             assert!(
@@ -210,14 +206,9 @@ fn flattenability_is_what_the_construction_says() {
         let mesh = load(&f);
         let theta = geometry::angle_sums(&mesh);
         let w = geometry::flattenability(&mesh, &theta);
-        let all: Vec<usize> = (0..f.mesh.triangles.len()).collect();
         let mut interior = Vec::new();
         for (p, _) in f.mesh.patch_names.iter().enumerate() {
-            let faces: Vec<usize> = all
-                .iter()
-                .copied()
-                .filter(|&t| f.mesh.face_patch[t] == p as u32)
-                .collect();
+            let faces = patch_faces(&f.mesh, p);
             let c = count(&f.mesh, &faces);
             for v in 0..c.theta.len() {
                 // interior of its patch and not touching another patch
@@ -278,6 +269,13 @@ fn flattenability_is_what_the_construction_says() {
             other => panic!("fixture {other} has no expectation here"),
         }
     }
+}
+
+/// The faces of patch `p`.
+fn patch_faces(raw: &RawMesh, p: usize) -> Vec<usize> {
+    (0..raw.triangles.len())
+        .filter(|&t| raw.face_patch[t] == p as u32)
+        .collect()
 }
 
 fn count_fan(raw: &RawMesh, v: usize) -> usize {

@@ -62,9 +62,9 @@ fn grid(
     (p2, tris)
 }
 
-/// Best rigid motion (rotation + translation, Kabsch in 2D) of `a` onto `b`; returns the
-/// largest distance after the fit.
-fn rigid_fit_max_error(a: &[[f64; 2]], b: &[[f64; 2]]) -> f64 {
+/// Distances of `a`'s points to `b`'s after the best rigid motion (rotation + translation,
+/// Kabsch in 2D) of `a` onto `b`.
+fn rigid_fit_distances(a: &[[f64; 2]], b: &[[f64; 2]]) -> Vec<f64> {
     let n = a.len() as f64;
     let ca = a
         .iter()
@@ -89,7 +89,12 @@ fn rigid_fit_max_error(a: &[[f64; 2]], b: &[[f64; 2]]) -> f64 {
             let y = s * p0 + c * p1 + cb[1] - q[1];
             (x * x + y * y).sqrt()
         })
-        .fold(0.0, f64::max)
+        .collect()
+}
+
+/// Largest distance after the best rigid fit of `a` onto `b`.
+fn rigid_fit_max_error(a: &[[f64; 2]], b: &[[f64; 2]]) -> f64 {
+    rigid_fit_distances(a, b).into_iter().fold(0.0, f64::max)
 }
 
 fn diameter2(p: &[[f64; 2]]) -> f64 {
@@ -457,34 +462,10 @@ fn gf_skirt_against_its_flat_pattern() {
     }
 }
 
+/// Root-mean-square distance after the best rigid fit of `a` onto `b`.
 fn rigid_fit_rms(a: &[[f64; 2]], b: &[[f64; 2]]) -> f64 {
-    let n = a.len() as f64;
-    let ca = a
-        .iter()
-        .fold([0.0, 0.0], |s, p| [s[0] + p[0] / n, s[1] + p[1] / n]);
-    let cb = b
-        .iter()
-        .fold([0.0, 0.0], |s, p| [s[0] + p[0] / n, s[1] + p[1] / n]);
-    let (mut sc, mut ss) = (0.0, 0.0);
-    for (p, q) in a.iter().zip(b) {
-        let (p0, p1) = (p[0] - ca[0], p[1] - ca[1]);
-        let (q0, q1) = (q[0] - cb[0], q[1] - cb[1]);
-        sc += p0 * q0 + p1 * q1;
-        ss += p0 * q1 - p1 * q0;
-    }
-    let th = ss.atan2(sc);
-    let (c, s) = (th.cos(), th.sin());
-    let sum: f64 = a
-        .iter()
-        .zip(b)
-        .map(|(p, q)| {
-            let (p0, p1) = (p[0] - ca[0], p[1] - ca[1]);
-            let x = c * p0 - s * p1 + cb[0] - q[0];
-            let y = s * p0 + c * p1 + cb[1] - q[1];
-            x * x + y * y
-        })
-        .sum();
-    (sum / n).sqrt()
+    let d = rigid_fit_distances(a, b);
+    (d.iter().map(|x| x * x).sum::<f64>() / d.len() as f64).sqrt()
 }
 
 /// A cylinder strip with two rectangular holes (χ = −1, three loops): developable, so its
@@ -578,32 +559,64 @@ fn curved_patch_with_two_holes() {
     assert_eq!(piece.measures["overlap"], 0);
 }
 
+/// A polar grid (20 rings of 64) through `f(ρ, t)`, ρ ∈ [0, 1] from the centre, t the angle.
+fn polar_mesh(f: impl Fn(f64, f64) -> [f64; 3]) -> Mesh {
+    let (nr, nt) = (20usize, 64usize);
+    let mut pos = vec![f(0.0, 0.0)];
+    for i in 1..=nr {
+        for k in 0..nt {
+            pos.push(f(i as f64 / nr as f64, 2.0 * PI * k as f64 / nt as f64));
+        }
+    }
+    let id = |i: usize, k: usize| (1 + (i - 1) * nt + k % nt) as u32;
+    let mut tris = Vec::new();
+    for k in 0..nt {
+        tris.push([0, id(1, k), id(1, k + 1)]);
+    }
+    for i in 1..nr {
+        for k in 0..nt {
+            tris.push([id(i, k), id(i + 1, k), id(i + 1, k + 1)]);
+            tris.push([id(i, k), id(i + 1, k + 1), id(i, k + 1)]);
+        }
+    }
+    mesh_of(pos, tris)
+}
+
+/// Spherical cap to `deg` degrees from the pole.
+fn sphere_cap(deg: f64) -> Mesh {
+    polar_mesh(|rho, t| {
+        let phi = deg.to_radians() * rho;
+        [phi.sin() * t.cos(), phi.sin() * t.sin(), phi.cos()]
+    })
+}
+
+/// A piece that cannot lie flat (a whole T-shirt body as one patch, χ = −2) is still
+/// flattened, but the job says so in words; a piece that can lie flat gets no such warning.
+#[test]
+fn unflattenable_piece_is_named_in_a_warning() {
+    let ok = flatten::run(&sphere_cap(60.0), &Params::default(), &Silent::default()).unwrap();
+    assert_eq!(
+        ok.patterns.unwrap().pieces[0].measures["flipped_triangles"],
+        0
+    );
+    assert!(ok.summary["job_warnings"].as_array().unwrap().is_empty());
+    let Some(shirt) = shared("garment/diffavatar_tshirt.obj") else {
+        return;
+    };
+    let out = flatten::run(&shirt, &Params::default(), &Silent::default()).unwrap();
+    let piece = &out.patterns.as_ref().unwrap().pieces[0];
+    let flips = piece.measures["flipped_triangles"].as_u64().unwrap();
+    let ws = out.summary["job_warnings"].as_array().unwrap();
+    println!("t-shirt: {flips} flips, warnings {ws:?}");
+    assert!(flips > 0);
+    assert_eq!(ws.len(), 1);
+    let w = ws[0].as_str().unwrap();
+    assert!(w.contains(&format!("piece `{}`", piece.patch)) && w.contains("flipped"));
+}
+
 #[test]
 fn hemisphere_has_no_flip_and_no_overlap_lpfb_beside_lscm() {
-    let mut meshes = vec![("procedural cap".to_string(), {
-        // spherical cap to 75° from the pole, polar grid
-        let (nr, nt) = (20usize, 64usize);
-        let mut pos = vec![[0.0, 0.0, 1.0]];
-        for i in 1..=nr {
-            let phi = 75f64.to_radians() * i as f64 / nr as f64;
-            for k in 0..nt {
-                let t = 2.0 * PI * k as f64 / nt as f64;
-                pos.push([phi.sin() * t.cos(), phi.sin() * t.sin(), phi.cos()]);
-            }
-        }
-        let id = |i: usize, k: usize| (1 + (i - 1) * nt + k % nt) as u32;
-        let mut tris = Vec::new();
-        for k in 0..nt {
-            tris.push([0, id(1, k), id(1, k + 1)]);
-        }
-        for i in 1..nr {
-            for k in 0..nt {
-                tris.push([id(i, k), id(i + 1, k), id(i + 1, k + 1)]);
-                tris.push([id(i, k), id(i + 1, k + 1), id(i, k + 1)]);
-            }
-        }
-        mesh_of(pos, tris)
-    })];
+    let mut meshes = vec![("procedural cap".to_string(), sphere_cap(75.0))];
     let fixture = Path::new("fixtures/hemisphere_cap.obj");
     if fixture.exists() {
         meshes.push((
@@ -787,8 +800,16 @@ fn params_are_checked() {
     assert!(
         matches!(bad(r#"{"methd": "lscm"}"#), Err(algorithms::AlgoError::InvalidParam { key, .. }) if key == "methd")
     );
-    assert!(bad(r#"{"method": "abf"}"#).is_err());
-    assert!(bad(r#"{"unit": "ft"}"#).is_err());
+    // a bad value names its key even when other keys are fine
+    assert!(
+        matches!(bad(r#"{"unit": "cm", "method": "abf"}"#), Err(algorithms::AlgoError::InvalidParam { key, .. }) if key == "method")
+    );
+    assert!(
+        matches!(bad(r#"{"unit": "ft"}"#), Err(algorithms::AlgoError::InvalidParam { key, .. }) if key == "unit")
+    );
+    assert!(
+        matches!(bad(r#"{"max_iterations": "many"}"#), Err(algorithms::AlgoError::InvalidParam { key, .. }) if key == "max_iterations")
+    );
     assert!(
         matches!(bad(r#"{"tolerance": 0}"#), Err(algorithms::AlgoError::InvalidParam { key, .. }) if key == "tolerance")
     );

@@ -104,12 +104,23 @@ pub fn parse_params<P: DeserializeOwned>(
         let msg = e.to_string();
         // serde_json says "unknown field `foo`, expected …" or "invalid type: … for key `x`"
         // depending on the error; pull the key out when it names one.
-        let key = msg
+        let named = msg
             .split('`')
             .nth(1)
-            .filter(|_| msg.starts_with("unknown field") || msg.starts_with("missing field"))
-            .unwrap_or("")
-            .to_string();
+            .filter(|_| msg.starts_with("unknown field") || msg.starts_with("missing field"));
+        // A bad value ("unknown variant `foo`", "invalid type") does not say whose: find the
+        // key that fails on its own (every parameter has a default, so one key parses alone).
+        let key = match named {
+            Some(k) => k.to_string(),
+            None => params
+                .iter()
+                .find(|(k, v)| {
+                    let one = serde_json::Map::from_iter([((*k).clone(), (*v).clone())]);
+                    serde_json::from_value::<P>(serde_json::Value::Object(one)).is_err()
+                })
+                .map(|(k, _)| k.clone())
+                .unwrap_or_default(),
+        };
         AlgoError::InvalidParam { key, message: msg }
     })
 }

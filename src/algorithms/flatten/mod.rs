@@ -522,6 +522,38 @@ pub fn run(mesh: &Mesh, params: &Params, control: &dyn Control) -> Result<Outcom
         )
         .unwrap_or_default(),
     );
+    // Say in words when a piece is not a usable pattern: a whole garment body as one patch,
+    // say, is too curved to lie flat without folding over itself.
+    let job_warnings: Vec<String> = pieces
+        .iter()
+        .zip(&infos)
+        .filter_map(|(p, i)| {
+            let flips = p.measures["flipped_triangles"].as_u64().unwrap_or(0);
+            let overlap = p.measures["overlap"].as_u64().unwrap_or(0);
+            let mut what = Vec::new();
+            if !i.converged {
+                what.push(format!(
+                    "LPFB did not converge (‖∇J‖ = {:.3e} after {} iterations)",
+                    i.grad_norm, i.iterations
+                ));
+            }
+            if flips > 0 {
+                what.push(format!("{flips} flipped triangles"));
+            }
+            if overlap > 0 {
+                what.push("the pattern overlaps itself".to_string());
+            }
+            (!what.is_empty()).then(|| {
+                format!(
+                    "piece `{}`: {}; it is too curved to lie flat as one piece: make it more \
+                     developable (fl-mesh) or split it into patches",
+                    p.patch,
+                    what.join(", ")
+                )
+            })
+        })
+        .collect();
+    summary.insert("job_warnings".into(), serde_json::json!(job_warnings));
     summary.insert(
         "all_converged".into(),
         serde_json::json!(infos.iter().all(|i| i.converged)),
