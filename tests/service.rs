@@ -792,6 +792,18 @@ async fn submit_errors() {
             "params.bogus",
         ),
         (
+            json!({"kind": "flatten", "mesh_id": mid, "params": {"method": "origami"}}),
+            "params.method",
+        ),
+        (
+            json!({"kind": "flatten", "mesh_id": mid, "params": {"unit": 3}}),
+            "params.unit",
+        ),
+        (
+            json!({"kind": "flatten", "mesh_id": mid, "params": []}),
+            "params",
+        ),
+        (
             json!({"kind": "report", "mesh_id": mid, "params": {"x": 1}}),
             "params.x",
         ),
