@@ -60,6 +60,10 @@ fn main() {
         ])
         .arg(&dir)
         .env("FLATMESH_LOG", "warn")
+        .env(
+            "FLATMESH_WORKER_NICE",
+            std::env::var("WORKER_NICE").unwrap_or_else(|_| "10".into()),
+        )
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())
         .spawn()

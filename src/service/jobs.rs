@@ -36,6 +36,8 @@ pub struct Limits {
     pub retention: Duration,
     /// Runs started before a job that keeps being interrupted (process killed) fails.
     pub max_attempts: u32,
+    /// Nice value of the worker threads (Linux), so that HTTP threads get the CPU first.
+    pub nice: i32,
 }
 
 /// In-memory state of a queued or running job.
@@ -102,16 +104,16 @@ impl Control for JobControl<'_> {
 }
 
 #[cfg(target_os = "linux")]
-fn lower_priority() {
+fn lower_priority(nice: i32) {
     // SAFETY: plain syscalls on the calling thread; failure leaves the priority unchanged.
     unsafe {
         let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
-        libc::setpriority(libc::PRIO_PROCESS, tid, 10);
+        libc::setpriority(libc::PRIO_PROCESS, tid, nice);
     }
 }
 
 #[cfg(not(target_os = "linux"))]
-fn lower_priority() {}
+fn lower_priority(_: i32) {}
 
 fn panic_message(p: &(dyn std::any::Any + Send)) -> String {
     if let Some(s) = p.downcast_ref::<&str>() {
@@ -142,12 +144,13 @@ impl Executor {
         webhooks: Arc<Webhooks>,
         runner: Runner,
     ) -> std::io::Result<Arc<Executor>> {
+        let nice = limits.nice;
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(limits.workers.max(1))
             .thread_name(|i| format!("flatmesh-worker-{i}"))
             // Jobs yield the CPU to the HTTP threads, so that status polls stay fast while
             // every worker is busy (Linux: setpriority on a thread id sets that thread only).
-            .start_handler(|_| lower_priority())
+            .start_handler(move |_| lower_priority(nice))
             .build()
             .map_err(std::io::Error::other)?;
         Ok(Arc::new(Executor {
@@ -578,6 +581,7 @@ mod tests {
             time_limit: Duration::from_secs(60),
             retention: Duration::from_secs(60),
             max_attempts: 3,
+            nice: 10,
         };
         let exec = Executor::with_runner(store.clone(), limits, metrics, hooks, runner).unwrap();
         let obj = std::fs::read("fixtures/flat_disk.obj").unwrap();

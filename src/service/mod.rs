@@ -112,6 +112,10 @@ pub struct Config {
     /// Runs of a job interrupted by a restart before it fails.
     #[arg(long, env = "FLATMESH_MAX_ATTEMPTS", default_value_t = 3)]
     pub max_attempts: u32,
+    /// Nice value of the job threads (Linux; 0-19): higher keeps HTTP answers fast while
+    /// every worker is busy.
+    #[arg(long, env = "FLATMESH_WORKER_NICE", default_value_t = 10, value_parser = clap::value_parser!(i32).range(0..=19))]
+    pub worker_nice: i32,
     /// Bearer API keys (comma-separated); when set, every /v1 route requires one.
     #[arg(long = "api-key", env = "FLATMESH_API_KEYS", value_delimiter = ',')]
     pub api_keys: Vec<String>,
@@ -366,6 +370,7 @@ async fn serve_async(cfg: Config) -> Result<(), String> {
         time_limit: cfg.job_time_limit,
         retention: cfg.retention,
         max_attempts: cfg.max_attempts,
+        nice: cfg.worker_nice,
     };
     let exec = jobs::Executor::new(store.clone(), limits, metrics.clone(), webhooks.clone())
         .map_err(|e| e.to_string())?;
@@ -397,6 +402,17 @@ async fn serve_async(cfg: Config) -> Result<(), String> {
                 Ok(Ok(n)) if n > 0 => tracing::info!(n, "expired jobs deleted"),
                 Ok(Err(e)) => tracing::error!(error = %e, "sweep failed"),
                 _ => {}
+            }
+        }
+    });
+    let maint = st.store.clone();
+    tokio::spawn(async move {
+        let mut tick = tokio::time::interval(Duration::from_secs(1));
+        loop {
+            tick.tick().await;
+            let m = maint.clone();
+            if let Ok(Err(e)) = tokio::task::spawn_blocking(move || m.maintain()).await {
+                tracing::warn!(error = %e, "store maintenance failed");
             }
         }
     });
