@@ -166,6 +166,7 @@ async fn upload(c: &reqwest::Client, s: &Server, bytes: Vec<u8>) -> Value {
 }
 
 async fn submit(c: &reqwest::Client, s: &Server, body: Value) -> Value {
+    check("JobRequest", &body);
     let r = c.post(s.url("/v1/jobs")).json(&body).send().await.unwrap();
     assert_eq!(r.status(), 202, "{:?}", r.text().await);
     json_of(r, "Job").await
@@ -1222,7 +1223,7 @@ async fn webhook_is_signed_and_delivered() {
     );
     let v: Value = serde_json::from_slice(&body).unwrap();
     assert_eq!(v["type"], "job.succeeded");
-    check("Job", &v["data"]);
+    check("WebhookEvent", &v);
     assert_eq!(v["data"]["id"], j["id"]);
 }
 
@@ -1273,6 +1274,7 @@ async fn client_commands() {
     let (ok, out, err) = flatmesh_client(&base, &["wait", id, "--timeout", "60"]);
     assert!(ok, "{err}");
     let done: Value = serde_json::from_str(&out).unwrap();
+    check("Job", &done);
     assert_eq!(done["status"], "succeeded");
     assert!(err.contains(id), "progress lines on stderr: {err}");
     let dir = tmp("client-out");
@@ -1311,6 +1313,7 @@ async fn client_commands() {
         flatmesh_client(&base, &["submit", "report", "--mesh", "fixtures/cone.obj"]);
     assert!(ok, "{err}");
     let j: Value = serde_json::from_str(&out).unwrap();
+    check("Job", &j);
     let (ok, _, err) = flatmesh_client(&base, &["wait", j["id"].as_str().unwrap()]);
     assert!(ok, "{err}");
     let (ok, _, err) = flatmesh_client(
