@@ -13,4 +13,5 @@ pub mod linalg;
 pub mod mesh;
 pub mod pattern;
 pub mod report;
+pub mod service;
 pub mod spatial;

@@ -63,6 +63,10 @@ enum Command {
         /// Output directory (created if missing).
         dir: PathBuf,
     },
+    /// Run the REST job service (see openapi.yaml, `GET /openapi.yaml`).
+    Serve(flatmesh::service::Config),
+    /// Talk to a running service: upload, submit, wait, download, health.
+    Client(flatmesh::service::client::ClientArgs),
 }
 
 fn main() -> ExitCode {
@@ -76,6 +80,20 @@ fn main() -> ExitCode {
             set,
             reference,
         } => run(&kind, &mesh, &out, &set, reference.as_deref()),
+        Command::Serve(cfg) => match flatmesh::service::serve(cfg) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("flatmesh serve: {e}");
+                ExitCode::FAILURE
+            }
+        },
+        Command::Client(args) => match flatmesh::service::client::run(args) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("flatmesh client: {e}");
+                ExitCode::FAILURE
+            }
+        },
         Command::Fixtures { dir } => match flatmesh::fixtures::write_all(&dir) {
             Ok(paths) => {
                 for p in paths {

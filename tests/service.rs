@@ -1,0 +1,1402 @@
+//! Black-box tests of `flatmesh serve`: the real binary on a random loopback port, spoken to
+//! with reqwest. Every JSON body seen is validated against the schemas of openapi.yaml.
+
+use base64::Engine;
+use serde_json::{json, Value};
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+// ---------------------------------------------------------------- harness
+
+struct Server {
+    child: Child,
+    base: String,
+    dir: PathBuf,
+}
+
+impl Server {
+    fn start(dir: &Path, args: &[&str]) -> Server {
+        std::fs::create_dir_all(dir).unwrap();
+        let log = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(dir.join("server.log"))
+            .unwrap();
+        let mut child = Command::new(env!("CARGO_BIN_EXE_flatmesh"))
+            .arg("serve")
+            .args(["--bind", "127.0.0.1:0", "--data-dir"])
+            .arg(dir)
+            .args(args)
+            .env_remove("FLATMESH_API_KEYS")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::from(log))
+            .spawn()
+            .expect("start flatmesh serve");
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        let base = line
+            .trim()
+            .strip_prefix("listening on ")
+            .unwrap_or_else(|| panic!("unexpected first line {line:?}"))
+            .to_string();
+        Server {
+            child,
+            base,
+            dir: dir.to_path_buf(),
+        }
+    }
+    fn url(&self, path: &str) -> String {
+        format!("{}{}", self.base, path)
+    }
+    /// SIGKILL: the process dies without any chance to tidy up.
+    fn kill(mut self) -> PathBuf {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        self.dir.clone()
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("flatmesh-svc-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+fn fixture(name: &str) -> Vec<u8> {
+    std::fs::read(format!("fixtures/{name}.obj")).expect("fixture file")
+}
+
+/// A saddle z = 0.3(x² − y²) on an n×n grid: flattening it with a tolerance that cannot be
+/// reached keeps a worker busy for seconds, checking cancellation every iteration.
+fn saddle_obj(n: usize) -> Vec<u8> {
+    let mut s = String::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            let x = i as f64 / n as f64 * 2.0 - 1.0;
+            let y = j as f64 / n as f64 * 2.0 - 1.0;
+            s += &format!("v {x:.6} {y:.6} {:.6}\n", 0.3 * (x * x - y * y));
+        }
+    }
+    for j in 0..n {
+        for i in 0..n {
+            let a = j * (n + 1) + i + 1;
+            let (b, c) = (a + 1, a + n + 1);
+            s += &format!("f {a} {b} {}\nf {a} {} {c}\n", c + 1, c + 1);
+        }
+    }
+    s.into_bytes()
+}
+
+const SLOW: &str = r#"{"tolerance": 1e-300, "max_iterations": 100000}"#;
+
+// ---------------------------------------------------------------- openapi
+
+fn openapi() -> Value {
+    let text = std::fs::read_to_string("src/service/openapi.yaml").unwrap();
+    let y: serde_yaml::Value = serde_yaml::from_str(&text).unwrap();
+    serde_json::to_value(y).unwrap()
+}
+
+/// Validate `v` against `#/components/schemas/{name}` of openapi.yaml (JSON Schema 2020-12).
+fn check(name: &str, v: &Value) {
+    thread_local! {
+        static DOC: Value = openapi();
+    }
+    DOC.with(|doc| {
+        let mut schema = doc.clone();
+        schema["$ref"] = json!(format!("#/components/schemas/{name}"));
+        let validator = jsonschema::validator_for(&schema).expect("schema compiles");
+        let errors: Vec<String> = validator
+            .iter_errors(v)
+            .map(|e| format!("{} at {}", e, e.instance_path()))
+            .collect();
+        assert!(
+            errors.is_empty(),
+            "{name} does not match openapi.yaml: {errors:?}\n{v:#}"
+        );
+    });
+}
+
+async fn json_of(res: reqwest::Response, schema: &str) -> Value {
+    let v: Value = res.json().await.expect("JSON body");
+    check(schema, &v);
+    v
+}
+
+/// Assert a problem+json answer of `status`, valid against the schema; returns it.
+async fn problem(res: reqwest::Response, status: u16) -> Value {
+    assert_eq!(res.status().as_u16(), status, "status");
+    assert_eq!(
+        res.headers()["content-type"].to_str().unwrap(),
+        "application/problem+json"
+    );
+    let v = json_of(res, "Problem").await;
+    assert_eq!(v["status"], status);
+    v
+}
+
+fn client() -> reqwest::Client {
+    reqwest::Client::builder()
+        .timeout(Duration::from_secs(60))
+        .build()
+        .unwrap()
+}
+
+async fn upload(c: &reqwest::Client, s: &Server, bytes: Vec<u8>) -> Value {
+    let r = c
+        .post(s.url("/v1/meshes"))
+        .header("content-type", "model/obj")
+        .body(bytes)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 201);
+    json_of(r, "Mesh").await
+}
+
+async fn submit(c: &reqwest::Client, s: &Server, body: Value) -> Value {
+    check("JobRequest", &body);
+    let r = c.post(s.url("/v1/jobs")).json(&body).send().await.unwrap();
+    assert_eq!(r.status(), 202, "{:?}", r.text().await);
+    json_of(r, "Job").await
+}
+
+async fn job(c: &reqwest::Client, s: &Server, id: &str) -> Value {
+    let r = c
+        .get(s.url(&format!("/v1/jobs/{id}")))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    json_of(r, "Job").await
+}
+
+async fn wait_for(c: &reqwest::Client, s: &Server, id: &str, want: &[&str]) -> Value {
+    let start = Instant::now();
+    loop {
+        let j = job(c, s, id).await;
+        if want.contains(&j["status"].as_str().unwrap()) {
+            return j;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "job {id} still {} (waiting for {want:?})",
+            j["status"]
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+// ---------------------------------------------------------------- tests
+
+#[test]
+fn routes_and_openapi_agree() {
+    let doc = openapi();
+    let mut spec = std::collections::BTreeSet::new();
+    for (path, item) in doc["paths"].as_object().unwrap() {
+        for m in ["get", "post", "put", "patch", "delete"] {
+            if item.get(m).is_some() {
+                spec.insert((m.to_string(), path.clone()));
+            }
+        }
+    }
+    let routes: std::collections::BTreeSet<_> = flatmesh::service::ROUTES
+        .iter()
+        .map(|(m, p)| (m.to_string(), p.to_string()))
+        .collect();
+    assert_eq!(spec, routes, "openapi.yaml paths vs the router's routes");
+    let kinds: Vec<&str> = doc["components"]["schemas"]["Kind"]["enum"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_str().unwrap())
+        .collect();
+    assert_eq!(
+        kinds,
+        flatmesh::algorithms::KINDS,
+        "job kinds in openapi.yaml"
+    );
+    // The served document is the file.
+}
+
+/// Standard Webhooks' published example (svix): the signature must match bit for bit.
+#[test]
+fn webhook_signature_matches_standard_example() {
+    let key = flatmesh::service::webhook::decode_secret("whsec_MfKQ9r8GKYqrTwjUPD8ILPZIo2LaLaSw")
+        .unwrap();
+    let sig = flatmesh::service::webhook::sign(
+        &key,
+        "msg_p5jXN8AQM9LWM0D4loKWxJek",
+        1614265330,
+        br#"{"test": 2432232314}"#,
+    );
+    assert_eq!(sig, "v1,g0hM9SsE+OTPJTGt/tmIKtSyZlE3uFJELVlNIOLJ1OE=");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_route_is_served() {
+    let s = Server::start(&tmp("routes"), &[]);
+    let c = client();
+    for (m, p) in flatmesh::service::ROUTES {
+        let path = p.replace("{id}", "x");
+        let r = c
+            .request(m.to_uppercase().parse().unwrap(), s.url(&path))
+            .send()
+            .await
+            .unwrap();
+        let status = r.status().as_u16();
+        assert_ne!(status, 405, "{m} {p}");
+        if status == 404 {
+            let v = problem(r, 404).await;
+            assert!(
+                !v["detail"].as_str().unwrap().starts_with("no route"),
+                "{m} {p} is not routed"
+            );
+        }
+    }
+    // And an unknown route or method is a problem too.
+    let v = problem(c.get(s.url("/v2/nothing")).send().await.unwrap(), 404).await;
+    assert!(v["detail"].as_str().unwrap().starts_with("no route"));
+    let r = c.put(s.url("/v1/jobs")).send().await.unwrap();
+    assert_eq!(r.status(), 405);
+    assert_eq!(
+        r.headers()["content-type"].to_str().unwrap(),
+        "application/problem+json"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn operational_endpoints() {
+    let s = Server::start(&tmp("ops"), &[]);
+    let c = client();
+    let r = c.get(s.url("/healthz")).send().await.unwrap();
+    assert_eq!(r.status(), 200);
+    assert!(r.headers().contains_key("x-request-id"));
+    json_of(r, "Health").await;
+    let r = c.get(s.url("/readyz")).send().await.unwrap();
+    assert_eq!(r.status(), 200);
+    json_of(r, "Ready").await;
+    let v = json_of(c.get(s.url("/version")).send().await.unwrap(), "Version").await;
+    assert_eq!(v["version"], env!("CARGO_PKG_VERSION"));
+    let text = c
+        .get(s.url("/openapi.yaml"))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert_eq!(
+        text,
+        std::fs::read_to_string("src/service/openapi.yaml").unwrap()
+    );
+    upload(&c, &s, fixture("cylinder")).await;
+    let m = c
+        .get(s.url("/metrics"))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert!(m.contains("flatmesh_meshes_uploaded_total 1\n"), "{m}");
+    assert!(m.contains("# TYPE flatmesh_jobs_queued gauge"));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn meshes_upload_report_delete() {
+    let s = Server::start(&tmp("meshes"), &["--max-upload", "64KiB"]);
+    let c = client();
+    let bytes = fixture("hemisphere_cap");
+    let r = c
+        .post(s.url("/v1/meshes"))
+        .header("content-type", "model/obj")
+        .body(bytes.clone())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 201);
+    let loc = r.headers()["location"].to_str().unwrap().to_string();
+    let etag = r.headers()["etag"].to_str().unwrap().to_string();
+    let m = json_of(r, "Mesh").await;
+    // Independent truth: the library on the same bytes.
+    let (mesh, w) = flatmesh::io::load(&bytes, flatmesh::io::Format::Obj).unwrap();
+    let rep = flatmesh::report::Report::compute(&mesh, &w);
+    assert_eq!(m["vertices"], rep.vertices);
+    assert_eq!(m["faces"], rep.faces);
+    assert_eq!(
+        m["max_flattenability"].as_f64().unwrap(),
+        rep.max_flattenability
+    );
+    assert!(rep.max_flattenability > 1e-3, "a cap is not developable");
+    assert_eq!(m["developable"], false);
+    let id = m["id"].as_str().unwrap();
+    assert_eq!(loc, format!("/v1/meshes/{id}"));
+    let r = c.get(s.url(&loc)).send().await.unwrap();
+    assert_eq!(r.headers()["etag"].to_str().unwrap(), etag);
+    assert_eq!(json_of(r, "Mesh").await, m);
+    let report = json_of(
+        c.get(s.url(&format!("{loc}/report"))).send().await.unwrap(),
+        "Report",
+    )
+    .await;
+    let pv = report["per_vertex"].as_array().unwrap();
+    assert_eq!(pv.len(), rep.per_vertex.len());
+    for (a, b) in pv.iter().zip(&rep.per_vertex) {
+        assert_eq!(a["flattenability"].as_f64().unwrap(), b.flattenability);
+    }
+    // Gauss–Bonnet-free sanity: ϖ = |2π − θ| at interior vertices.
+    for v in pv {
+        if v["interior"].as_bool().unwrap() {
+            let t = v["angle_sum"].as_f64().unwrap();
+            let w = v["flattenability"].as_f64().unwrap();
+            assert!((w - (2.0 * std::f64::consts::PI - t).abs()).abs() < 1e-12);
+        }
+    }
+
+    // glTF binary and JSON, and multipart, are accepted; the counts agree with the OBJ.
+    let glb = flatmesh::io::gltf::write_glb(&mesh, None);
+    let r = c
+        .post(s.url("/v1/meshes"))
+        .header("content-type", "model/gltf-binary")
+        .body(glb)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 201);
+    let g = json_of(r, "Mesh").await;
+    assert_eq!(
+        (g["format"].as_str(), &g["faces"]),
+        (Some("glb"), &m["faces"])
+    );
+    let gltf = flatmesh::io::gltf::write_gltf(&mesh, None);
+    let r = c
+        .post(s.url("/v1/meshes"))
+        .header("content-type", "model/gltf+json")
+        .body(gltf)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 201);
+    assert_eq!(json_of(r, "Mesh").await["vertices"], m["vertices"]);
+    let form = reqwest::multipart::Form::new().part(
+        "mesh",
+        reqwest::multipart::Part::bytes(fixture("cone"))
+            .file_name("cone.obj")
+            .mime_str("model/obj")
+            .unwrap(),
+    );
+    let r = c
+        .post(s.url("/v1/meshes"))
+        .multipart(form)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 201);
+    assert_eq!(json_of(r, "Mesh").await["developable"], true);
+
+    // Errors.
+    let r = c
+        .post(s.url("/v1/meshes"))
+        .header("content-type", "text/html")
+        .body("<html>")
+        .send()
+        .await
+        .unwrap();
+    problem(r, 415).await;
+    let r = c
+        .post(s.url("/v1/meshes"))
+        .header("content-type", "model/obj")
+        .body("v 0 0 0\nv 1 0 0\nf 1 2 3\n")
+        .send()
+        .await
+        .unwrap();
+    let p = problem(r, 422).await;
+    assert_eq!(p["field"], "body");
+    assert!(p["detail"].as_str().unwrap().contains("line 3"), "{p}");
+    let r = c
+        .post(s.url("/v1/meshes"))
+        .header("content-type", "model/obj")
+        .body(vec![b'#'; 100 * 1024])
+        .send()
+        .await
+        .unwrap();
+    problem(r, 413).await;
+    problem(c.get(s.url("/v1/meshes/m_nope")).send().await.unwrap(), 404).await;
+    let r = c.delete(s.url(&loc)).send().await.unwrap();
+    assert_eq!(r.status(), 204);
+    problem(c.get(s.url(&loc)).send().await.unwrap(), 404).await;
+    problem(c.delete(s.url(&loc)).send().await.unwrap(), 404).await;
+}
+
+/// Each job kind end to end on fixtures, with results checked against the library.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_kind_end_to_end() {
+    let s = Server::start(&tmp("kinds"), &[]);
+    let c = client();
+    assert_eq!(flatmesh::algorithms::KINDS, ["report", "flatten"]);
+    let bytes = fixture("tube_two_panels");
+    let (mesh, w) = flatmesh::io::load(&bytes, flatmesh::io::Format::Obj).unwrap();
+    let m = upload(&c, &s, bytes.clone()).await;
+    let mid = m["id"].as_str().unwrap();
+
+    // report
+    let r = c
+        .post(s.url("/v1/jobs"))
+        .json(&json!({"kind": "report", "mesh_id": mid}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202);
+    let loc = r.headers()["location"].to_str().unwrap().to_string();
+    assert!(r.headers().contains_key("retry-after"));
+    let j = json_of(r, "Job").await;
+    assert_eq!(loc, format!("/v1/jobs/{}", j["id"].as_str().unwrap()));
+    let id = j["id"].as_str().unwrap();
+    let done = wait_for(&c, &s, id, &["succeeded", "failed"]).await;
+    assert_eq!(done["status"], "succeeded", "{done}");
+    assert!(done["expires_at"].is_string() && done["finished_at"].is_string());
+    let result = json_of(
+        c.get(s.url(&format!("/v1/jobs/{id}/result")))
+            .send()
+            .await
+            .unwrap(),
+        "Report",
+    )
+    .await;
+    let rep = flatmesh::report::Report::compute(&mesh, &w);
+    assert_eq!(
+        result["max_flattenability"].as_f64().unwrap(),
+        rep.max_flattenability
+    );
+    assert_eq!(
+        result["per_vertex"].as_array().unwrap().len(),
+        mesh.num_vertices()
+    );
+    // mesh in three formats: same geometry as the input (report does not change it)
+    for (f, fmt, media) in [
+        ("glb", flatmesh::io::Format::Glb, "model/gltf-binary"),
+        ("gltf", flatmesh::io::Format::Gltf, "model/gltf+json"),
+        ("obj", flatmesh::io::Format::Obj, "model/obj"),
+    ] {
+        let r = c
+            .get(s.url(&format!("/v1/jobs/{id}/mesh?format={f}")))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 200);
+        assert_eq!(r.headers()["content-type"].to_str().unwrap(), media);
+        let b = r.bytes().await.unwrap();
+        let (back, _) = flatmesh::io::load(&b, fmt).unwrap();
+        assert_eq!(back.triangles().len(), mesh.triangles().len(), "{f}");
+        let mut worst = 0.0f64;
+        // GLB/glTF store f32 positions.
+        for (p, q) in back.positions().iter().zip(mesh.positions()) {
+            for k in 0..3 {
+                worst = worst.max((p[k] - q[k]).abs());
+            }
+        }
+        assert!(worst < 1e-6, "{f}: positions moved by {worst}");
+    }
+    problem(
+        c.get(s.url(&format!("/v1/jobs/{id}/mesh?format=stl")))
+            .send()
+            .await
+            .unwrap(),
+        422,
+    )
+    .await;
+    // a report job has no patterns
+    problem(
+        c.get(s.url(&format!("/v1/jobs/{id}/patterns")))
+            .send()
+            .await
+            .unwrap(),
+        404,
+    )
+    .await;
+
+    // flatten on a developable fixture: every pattern edge as long as its 3D edge
+    let cyl = fixture("cylinder");
+    let (cmesh, _) = flatmesh::io::load(&cyl, flatmesh::io::Format::Obj).unwrap();
+    let cm = upload(&c, &s, cyl).await;
+    let j = submit(
+        &c,
+        &s,
+        json!({"kind": "flatten", "mesh_id": cm["id"], "params": {"unit": "mm"}}),
+    )
+    .await;
+    let id = j["id"].as_str().unwrap();
+    let done = wait_for(&c, &s, id, &["succeeded", "failed"]).await;
+    assert_eq!(done["status"], "succeeded", "{done}");
+    assert!(done["links"]["patterns"].is_string());
+    let r = c
+        .get(s.url(&format!("/v1/jobs/{id}/patterns?format=json")))
+        .send()
+        .await
+        .unwrap();
+    let pat = json_of(r, "Patterns").await;
+    let pos = cmesh.positions();
+    let mut edges = 0;
+    for piece in pat["pieces"].as_array().unwrap() {
+        let vid: Vec<usize> = piece["vertex_ids"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_u64().unwrap() as usize)
+            .collect();
+        let uv: Vec<[f64; 2]> = piece["uv"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| [p[0].as_f64().unwrap(), p[1].as_f64().unwrap()])
+            .collect();
+        for t in piece["triangles"].as_array().unwrap() {
+            for k in 0..3 {
+                let a = t[k].as_u64().unwrap() as usize;
+                let b = t[(k + 1) % 3].as_u64().unwrap() as usize;
+                let l2 = ((uv[a][0] - uv[b][0]).powi(2) + (uv[a][1] - uv[b][1]).powi(2)).sqrt();
+                let (p, q) = (pos[vid[a]], pos[vid[b]]);
+                let l3 =
+                    ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt();
+                assert!((l2 - l3).abs() < 1e-6 * l3.max(1.0), "edge {l2} vs {l3}");
+                edges += 1;
+            }
+        }
+    }
+    assert_eq!(edges, 3 * cmesh.triangles().len());
+    for (f, media, head) in [
+        ("svg", "image/svg+xml", "<?xml"),
+        ("dxf", "image/vnd.dxf", "0"),
+    ] {
+        let r = c
+            .get(s.url(&format!("/v1/jobs/{id}/patterns?format={f}")))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.headers()["content-type"].to_str().unwrap(), media);
+        assert!(r.text().await.unwrap().trim_start().starts_with(head));
+    }
+    // flatten with two panels: one piece per panel
+    let j = submit(&c, &s, json!({"kind": "flatten", "mesh_id": mid})).await;
+    let done = wait_for(&c, &s, j["id"].as_str().unwrap(), &["succeeded", "failed"]).await;
+    assert_eq!(done["status"], "succeeded", "{done}");
+    let pat: Value = c
+        .get(s.url(&format!("/v1/jobs/{}/patterns", j["id"].as_str().unwrap())))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    check("Patterns", &pat);
+    assert_eq!(pat["pieces"].as_array().unwrap().len(), 2);
+    assert_eq!(pat["seams"].as_array().unwrap().len(), 2);
+
+    // multipart submit: job + mesh in one request
+    let form = reqwest::multipart::Form::new()
+        .part(
+            "job",
+            reqwest::multipart::Part::text(json!({"kind": "report"}).to_string())
+                .mime_str("application/json")
+                .unwrap(),
+        )
+        .part(
+            "mesh",
+            reqwest::multipart::Part::bytes(fixture("saddle"))
+                .file_name("saddle.obj")
+                .mime_str("model/obj")
+                .unwrap(),
+        );
+    let r = c
+        .post(s.url("/v1/jobs"))
+        .multipart(form)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202);
+    let j = json_of(r, "Job").await;
+    let done = wait_for(&c, &s, j["id"].as_str().unwrap(), &["succeeded", "failed"]).await;
+    assert_eq!(done["status"], "succeeded");
+    let sm = json_of(
+        c.get(s.url(&format!("/v1/meshes/{}", done["mesh_id"].as_str().unwrap())))
+            .send()
+            .await
+            .unwrap(),
+        "Mesh",
+    )
+    .await;
+    assert_eq!(sm["developable"], false);
+
+    // list, filter, paginate
+    let all = json_of(
+        c.get(s.url("/v1/jobs?page_size=100")).send().await.unwrap(),
+        "JobList",
+    )
+    .await;
+    assert_eq!(all["jobs"].as_array().unwrap().len(), 4);
+    let fl = json_of(
+        c.get(s.url("/v1/jobs?kind=flatten&status=succeeded"))
+            .send()
+            .await
+            .unwrap(),
+        "JobList",
+    )
+    .await;
+    assert_eq!(fl["jobs"].as_array().unwrap().len(), 2);
+    let mut seen = vec![];
+    let mut token: Option<String> = None;
+    loop {
+        let mut u = s.url("/v1/jobs?page_size=1");
+        if let Some(t) = &token {
+            u += &format!("&page_token={t}");
+        }
+        let page = json_of(c.get(u).send().await.unwrap(), "JobList").await;
+        for j in page["jobs"].as_array().unwrap() {
+            seen.push(j["id"].as_str().unwrap().to_string());
+        }
+        match page["next_page_token"].as_str() {
+            Some(t) => token = Some(t.to_string()),
+            None => break,
+        }
+    }
+    let want: Vec<String> = all["jobs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|j| j["id"].as_str().unwrap().to_string())
+        .collect();
+    assert_eq!(seen, want, "pages of one, newest first, no gaps or repeats");
+    problem(
+        c.get(s.url("/v1/jobs?status=done")).send().await.unwrap(),
+        422,
+    )
+    .await;
+    problem(
+        c.get(s.url("/v1/jobs?page_size=0")).send().await.unwrap(),
+        422,
+    )
+    .await;
+
+    // ETag / 304
+    let r = c
+        .get(s.url(&format!("/v1/jobs/{id}")))
+        .send()
+        .await
+        .unwrap();
+    let etag = r.headers()["etag"].to_str().unwrap().to_string();
+    let r = c
+        .get(s.url(&format!("/v1/jobs/{id}")))
+        .header("if-none-match", &etag)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 304);
+    let r = c
+        .get(s.url(&format!("/v1/jobs/{id}")))
+        .header("if-none-match", "\"other\"")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+
+    // delete, then gone
+    let r = c
+        .delete(s.url(&format!("/v1/jobs/{id}")))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 204);
+    problem(
+        c.get(s.url(&format!("/v1/jobs/{id}")))
+            .send()
+            .await
+            .unwrap(),
+        404,
+    )
+    .await;
+    problem(
+        c.get(s.url(&format!("/v1/jobs/{id}/result")))
+            .send()
+            .await
+            .unwrap(),
+        404,
+    )
+    .await;
+    problem(
+        c.delete(s.url(&format!("/v1/jobs/{id}")))
+            .send()
+            .await
+            .unwrap(),
+        404,
+    )
+    .await;
+    // cancel of an ended job
+    let ended = done["id"].as_str().unwrap();
+    problem(
+        c.post(s.url(&format!("/v1/jobs/{ended}/cancel")))
+            .send()
+            .await
+            .unwrap(),
+        409,
+    )
+    .await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn submit_errors() {
+    let s = Server::start(&tmp("submit"), &[]);
+    let c = client();
+    let m = upload(&c, &s, fixture("cylinder")).await;
+    let mid = m["id"].as_str().unwrap();
+    let post = |body: &'static str| {
+        c.post(s.url("/v1/jobs"))
+            .header("content-type", "application/json")
+            .body(body)
+            .send()
+    };
+    problem(post("{not json").await.unwrap(), 400).await;
+    let r = c
+        .post(s.url("/v1/jobs"))
+        .header("content-type", "text/plain")
+        .body("{}")
+        .send()
+        .await
+        .unwrap();
+    problem(r, 415).await;
+    let cases = [
+        (json!({"mesh_id": mid}), "kind"),
+        (json!({"kind": "origami", "mesh_id": mid}), "kind"),
+        (json!({"kind": "flatten"}), "mesh_id"),
+        (json!({"kind": "flatten", "mesh_id": "m_nope"}), "mesh_id"),
+        (
+            json!({"kind": "flatten", "mesh_id": mid, "params": {"tolerance": 2}}),
+            "params.tolerance",
+        ),
+        (
+            json!({"kind": "flatten", "mesh_id": mid, "params": {"max_iterations": 0}}),
+            "params.max_iterations",
+        ),
+        (
+            json!({"kind": "flatten", "mesh_id": mid, "params": {"bogus": 1}}),
+            "params.bogus",
+        ),
+        (
+            json!({"kind": "flatten", "mesh_id": mid, "params": {"method": "origami"}}),
+            "params.method",
+        ),
+        (
+            json!({"kind": "flatten", "mesh_id": mid, "params": {"unit": 3}}),
+            "params.unit",
+        ),
+        (
+            json!({"kind": "flatten", "mesh_id": mid, "params": []}),
+            "params",
+        ),
+        (
+            json!({"kind": "report", "mesh_id": mid, "params": {"x": 1}}),
+            "params.x",
+        ),
+        (
+            json!({"kind": "report", "mesh_id": mid, "extra": 1}),
+            "extra",
+        ),
+        (
+            json!({"kind": "report", "mesh_id": mid, "callback_url": "ftp://example.com/x"}),
+            "callback_url",
+        ),
+        (
+            json!({"kind": "report", "mesh_id": mid, "callback_url": "http://127.0.0.1:9/hook"}),
+            "callback_url",
+        ),
+        (
+            json!({"kind": "report", "mesh_id": mid, "callback_url": "http://10.1.2.3/hook"}),
+            "callback_url",
+        ),
+        (
+            json!({"kind": "report", "mesh_id": mid, "callback_url": "http://[::1]/hook"}),
+            "callback_url",
+        ),
+        (
+            json!({"kind": "report", "mesh_id": mid, "callback_url": "http://localhost/hook"}),
+            "callback_url",
+        ),
+    ];
+    for (body, field) in cases {
+        let r = c.post(s.url("/v1/jobs")).json(&body).send().await.unwrap();
+        let p = problem(r, 422).await;
+        assert_eq!(p["field"], field, "{body}: {p}");
+    }
+    // nothing was queued by the refused requests
+    let l = json_of(c.get(s.url("/v1/jobs")).send().await.unwrap(), "JobList").await;
+    assert!(l["jobs"].as_array().unwrap().is_empty());
+
+    // Idempotency-Key: same request → same job; different request → 422
+    let body = json!({"kind": "report", "mesh_id": mid});
+    let r1 = c
+        .post(s.url("/v1/jobs"))
+        .header("idempotency-key", "abc-1")
+        .json(&body)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r1.status(), 202);
+    let j1 = json_of(r1, "Job").await;
+    wait_for(&c, &s, j1["id"].as_str().unwrap(), &["succeeded"]).await;
+    let r2 = c
+        .post(s.url("/v1/jobs"))
+        .header("idempotency-key", "abc-1")
+        .json(&body)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r2.status(), 202);
+    assert_eq!(r2.headers()["idempotent-replayed"], "true");
+    let j2 = json_of(r2, "Job").await;
+    assert_eq!(j1["id"], j2["id"]);
+    let r3 = c
+        .post(s.url("/v1/jobs"))
+        .header("idempotency-key", "abc-1")
+        .json(&json!({"kind": "flatten", "mesh_id": mid}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(problem(r3, 422).await["field"], "Idempotency-Key");
+    let l = json_of(c.get(s.url("/v1/jobs")).send().await.unwrap(), "JobList").await;
+    assert_eq!(
+        l["jobs"].as_array().unwrap().len(),
+        1,
+        "one job for three submits"
+    );
+
+    // 500: a result file lost behind the server's back is reported, not hidden
+    let id = j1["id"].as_str().unwrap();
+    std::fs::remove_file(s.dir.join(format!("blobs/jobs/{id}/report.json"))).unwrap();
+    problem(
+        c.get(s.url(&format!("/v1/jobs/{id}/result")))
+            .send()
+            .await
+            .unwrap(),
+        500,
+    )
+    .await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn api_keys() {
+    let s = Server::start(&tmp("keys"), &["--api-key", "k1,k2"]);
+    let c = client();
+    let p = problem(c.get(s.url("/v1/jobs")).send().await.unwrap(), 401).await;
+    assert_eq!(p["type"], "/problems/unauthorized");
+    let r = c
+        .get(s.url("/v1/jobs"))
+        .bearer_auth("wrong")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.headers()["www-authenticate"], "Bearer");
+    problem(r, 401).await;
+    let r = c
+        .get(s.url("/v1/jobs"))
+        .bearer_auth("k2")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    json_of(r, "JobList").await;
+    let r = c
+        .post(s.url("/v1/meshes"))
+        .header("content-type", "model/obj")
+        .body(fixture("cone"))
+        .send()
+        .await
+        .unwrap();
+    problem(r, 401).await;
+    // probes stay open
+    assert_eq!(c.get(s.url("/healthz")).send().await.unwrap().status(), 200);
+}
+
+/// Cancel a running job; a full queue answers 429 and readyz 503; the time limit fails a job;
+/// a mesh in use cannot be deleted.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn cancel_full_queue_time_limit() {
+    let s = Server::start(&tmp("queue"), &["--workers", "1", "--max-queued", "1"]);
+    let c = client();
+    let slow = upload(&c, &s, saddle_obj(250)).await;
+    let sid = slow["id"].as_str().unwrap();
+    let params: Value = serde_json::from_str(SLOW).unwrap();
+    let a = submit(
+        &c,
+        &s,
+        json!({"kind": "flatten", "mesh_id": sid, "params": params}),
+    )
+    .await;
+    let a_id = a["id"].as_str().unwrap();
+    let running = wait_for(&c, &s, a_id, &["running", "succeeded", "failed"]).await;
+    assert_eq!(running["status"], "running");
+    let b = submit(&c, &s, json!({"kind": "report", "mesh_id": sid})).await;
+    assert_eq!(b["status"], "queued");
+    let r = c
+        .post(s.url("/v1/jobs"))
+        .json(&json!({"kind": "report", "mesh_id": sid}))
+        .send()
+        .await
+        .unwrap();
+    let ra: u64 = r.headers()["retry-after"]
+        .to_str()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(ra >= 1);
+    problem(r, 429).await;
+    let r = c.get(s.url("/readyz")).send().await.unwrap();
+    assert!(r.headers().contains_key("retry-after"));
+    problem(r, 503).await;
+    // a mesh in use cannot go; results of an unfinished job are a conflict
+    problem(
+        c.delete(s.url(&format!("/v1/meshes/{sid}")))
+            .send()
+            .await
+            .unwrap(),
+        409,
+    )
+    .await;
+    problem(
+        c.get(s.url(&format!("/v1/jobs/{a_id}/result")))
+            .send()
+            .await
+            .unwrap(),
+        409,
+    )
+    .await;
+    // progress is reported while running
+    let t = Instant::now();
+    let now = loop {
+        let now = job(&c, &s, a_id).await;
+        if now["progress"].is_object() || t.elapsed() > Duration::from_secs(20) {
+            break now;
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    };
+    assert!(
+        now["progress"]["stage"]
+            .as_str()
+            .unwrap()
+            .starts_with("lpfb"),
+        "{now}"
+    );
+    assert!(
+        now["progress"]["step_norm"].as_f64().unwrap() > 0.0,
+        "{now}"
+    );
+    // cancel the queued one: ends at once
+    let r = c
+        .post(s.url(&format!("/v1/jobs/{}/cancel", b["id"].as_str().unwrap())))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202);
+    assert_eq!(json_of(r, "Job").await["status"], "cancelled");
+    // cancel the running one: ends at its next iteration
+    let t = Instant::now();
+    let r = c
+        .post(s.url(&format!("/v1/jobs/{a_id}/cancel")))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202);
+    let end = wait_for(&c, &s, a_id, &["cancelled", "succeeded", "failed"]).await;
+    assert_eq!(end["status"], "cancelled", "{end}");
+    assert!(
+        t.elapsed() < Duration::from_secs(3),
+        "cancel took {:?}",
+        t.elapsed()
+    );
+    problem(
+        c.get(s.url(&format!("/v1/jobs/{a_id}/result")))
+            .send()
+            .await
+            .unwrap(),
+        409,
+    )
+    .await;
+    let r = c.get(s.url("/readyz")).send().await.unwrap();
+    assert_eq!(r.status(), 200);
+    drop(s);
+
+    // time limit
+    let s = Server::start(&tmp("limit"), &["--workers", "1", "--job-time-limit", "1s"]);
+    let slow = upload(&c, &s, saddle_obj(250)).await;
+    let j = submit(
+        &c,
+        &s,
+        json!({"kind": "flatten", "mesh_id": slow["id"], "params": params}),
+    )
+    .await;
+    let end = wait_for(
+        &c,
+        &s,
+        j["id"].as_str().unwrap(),
+        &["cancelled", "succeeded", "failed"],
+    )
+    .await;
+    assert_eq!(end["status"], "failed", "{end}");
+    assert_eq!(end["error"]["type"], "/problems/time-limit");
+    let took = end["attempts"].as_u64().unwrap();
+    assert_eq!(took, 1);
+}
+
+/// Kill -9 the server with a finished, a running and a queued job; restart on the same data
+/// directory: the finished result is intact, the running job is re-queued (attempt 2), the
+/// queued job runs.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn restart_loses_nothing() {
+    let dir = tmp("restart");
+    let s = Server::start(&dir, &["--workers", "1"]);
+    let c = client();
+    let cyl = upload(&c, &s, fixture("cylinder")).await;
+    let done = submit(&c, &s, json!({"kind": "flatten", "mesh_id": cyl["id"]})).await;
+    let done_id = done["id"].as_str().unwrap().to_string();
+    wait_for(&c, &s, &done_id, &["succeeded"]).await;
+    let before = c
+        .get(s.url(&format!("/v1/jobs/{done_id}/patterns?format=dxf")))
+        .send()
+        .await
+        .unwrap()
+        .bytes()
+        .await
+        .unwrap();
+    let slow = upload(&c, &s, saddle_obj(250)).await;
+    let params: Value = serde_json::from_str(SLOW).unwrap();
+    let run = submit(
+        &c,
+        &s,
+        json!({"kind": "flatten", "mesh_id": slow["id"], "params": params}),
+    )
+    .await;
+    let run_id = run["id"].as_str().unwrap().to_string();
+    wait_for(&c, &s, &run_id, &["running"]).await;
+    let queued = submit(&c, &s, json!({"kind": "report", "mesh_id": cyl["id"]})).await;
+    let q_id = queued["id"].as_str().unwrap().to_string();
+    assert_eq!(job(&c, &s, &q_id).await["status"], "queued");
+    let dir = s.kill();
+
+    let s = Server::start(&dir, &["--workers", "1"]);
+    let j = job(&c, &s, &done_id).await;
+    assert_eq!(j["status"], "succeeded");
+    let after = c
+        .get(s.url(&format!("/v1/jobs/{done_id}/patterns?format=dxf")))
+        .send()
+        .await
+        .unwrap()
+        .bytes()
+        .await
+        .unwrap();
+    assert_eq!(before, after);
+    json_of(
+        c.get(s.url(&format!("/v1/meshes/{}", cyl["id"].as_str().unwrap())))
+            .send()
+            .await
+            .unwrap(),
+        "Mesh",
+    )
+    .await;
+    let r = wait_for(&c, &s, &run_id, &["running"]).await;
+    assert_eq!(r["attempts"], 2, "re-queued after the crash: {r}");
+    c.post(s.url(&format!("/v1/jobs/{run_id}/cancel")))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(
+        wait_for(&c, &s, &run_id, &["cancelled"]).await["status"],
+        "cancelled"
+    );
+    let q = wait_for(&c, &s, &q_id, &["succeeded", "failed"]).await;
+    assert_eq!(q["status"], "succeeded");
+    assert_eq!(q["attempts"], 1);
+    drop(s);
+
+    // A job interrupted as often as allowed fails instead of looping.
+    let s = Server::start(&dir, &["--workers", "1"]);
+    let again = submit(
+        &c,
+        &s,
+        json!({"kind": "flatten", "mesh_id": slow["id"], "params": params}),
+    )
+    .await;
+    let a_id = again["id"].as_str().unwrap().to_string();
+    wait_for(&c, &s, &a_id, &["running"]).await;
+    let dir = s.kill();
+    let s = Server::start(&dir, &["--workers", "1", "--max-attempts", "1"]);
+    let f = job(&c, &s, &a_id).await;
+    assert_eq!(f["status"], "failed", "{f}");
+    assert_eq!(f["error"]["type"], "/problems/interrupted");
+}
+
+/// A webhook reaches a receiver, which checks the Standard Webhooks signature itself.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn webhook_is_signed_and_delivered() {
+    use hmac::{Hmac, Mac};
+    use sha2::Sha256;
+    let key: Vec<u8> = (0u8..32).collect();
+    let secret = format!(
+        "whsec_{}",
+        base64::engine::general_purpose::STANDARD.encode(&key)
+    );
+    let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel::<(axum::http::HeaderMap, Vec<u8>)>();
+    let hits = std::sync::Arc::new(std::sync::atomic::AtomicUsize::new(0));
+    let h2 = hits.clone();
+    let app = axum::Router::new().route(
+        "/hook",
+        axum::routing::post(
+            move |headers: axum::http::HeaderMap, body: axum::body::Bytes| {
+                let tx = tx.clone();
+                let h2 = h2.clone();
+                async move {
+                    // fail the first delivery: the server must retry
+                    if h2.fetch_add(1, std::sync::atomic::Ordering::SeqCst) == 0 {
+                        return axum::http::StatusCode::SERVICE_UNAVAILABLE;
+                    }
+                    let _ = tx.send((headers, body.to_vec()));
+                    axum::http::StatusCode::NO_CONTENT
+                }
+            },
+        ),
+    );
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let hook = format!("http://{}/hook", listener.local_addr().unwrap());
+    tokio::spawn(async move { axum::serve(listener, app).await });
+
+    let s = Server::start(
+        &tmp("hook"),
+        &[
+            "--webhook-secret",
+            &secret,
+            "--allow-private-callbacks",
+            "--webhook-backoff",
+            "200ms,1s",
+        ],
+    );
+    let c = client();
+    let m = upload(&c, &s, fixture("cone")).await;
+    let j = submit(
+        &c,
+        &s,
+        json!({"kind": "report", "mesh_id": m["id"], "callback_url": hook}),
+    )
+    .await;
+    let (headers, body) = tokio::time::timeout(Duration::from_secs(30), rx.recv())
+        .await
+        .expect("webhook within 30 s")
+        .unwrap();
+    assert_eq!(
+        hits.load(std::sync::atomic::Ordering::SeqCst),
+        2,
+        "one retry"
+    );
+    let id = headers["webhook-id"].to_str().unwrap();
+    let ts = headers["webhook-timestamp"].to_str().unwrap();
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_secs() as i64;
+    assert!((ts.parse::<i64>().unwrap() - now).abs() < 60);
+    let mut mac = Hmac::<Sha256>::new_from_slice(&key).unwrap();
+    mac.update(format!("{id}.{ts}.").as_bytes());
+    mac.update(&body);
+    let expected = base64::engine::general_purpose::STANDARD.encode(mac.finalize().into_bytes());
+    let sigs = headers["webhook-signature"].to_str().unwrap();
+    assert!(
+        sigs.split(' ').any(|s| s == format!("v1,{expected}")),
+        "signature {sigs} vs v1,{expected}"
+    );
+    let v: Value = serde_json::from_slice(&body).unwrap();
+    assert_eq!(v["type"], "job.succeeded");
+    check("WebhookEvent", &v);
+    assert_eq!(v["data"]["id"], j["id"]);
+}
+
+fn flatmesh_client(base: &str, args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_flatmesh"))
+        .args(["client", "--server", base])
+        .args(args)
+        .env_remove("FLATMESH_API_KEY")
+        .output()
+        .unwrap();
+    (
+        out.status.success(),
+        String::from_utf8(out.stdout).unwrap(),
+        String::from_utf8(out.stderr).unwrap(),
+    )
+}
+
+/// `flatmesh client` against the real server: upload, submit (by id and multipart), wait,
+/// download, health.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn client_commands() {
+    let s = Server::start(&tmp("client"), &[]);
+    let c = client();
+    let base = s.base.clone();
+    let (ok, out, err) = flatmesh_client(&base, &["upload", "fixtures/cylinder.obj"]);
+    assert!(ok, "{err}");
+    let m: Value = serde_json::from_str(&out).unwrap();
+    check("Mesh", &m);
+    let mid = m["id"].as_str().unwrap();
+    let (ok, out, err) = flatmesh_client(
+        &base,
+        &[
+            "submit",
+            "flatten",
+            "--mesh-id",
+            mid,
+            "--set",
+            "unit=cm",
+            "--idempotency-key",
+            "k",
+        ],
+    );
+    assert!(ok, "{err}");
+    let j: Value = serde_json::from_str(&out).unwrap();
+    check("Job", &j);
+    assert_eq!(j["params"]["unit"], "cm");
+    let id = j["id"].as_str().unwrap();
+    let (ok, out, err) = flatmesh_client(&base, &["wait", id, "--timeout", "60"]);
+    assert!(ok, "{err}");
+    let done: Value = serde_json::from_str(&out).unwrap();
+    check("Job", &done);
+    assert_eq!(done["status"], "succeeded");
+    assert!(err.contains(id), "progress lines on stderr: {err}");
+    let dir = tmp("client-out");
+    std::fs::create_dir_all(&dir).unwrap();
+    for (what, format) in [("patterns", "dxf"), ("mesh", "obj"), ("result", "")] {
+        let out_file = dir.join(format!("{what}.{format}"));
+        let mut args = vec![
+            "download",
+            id,
+            "--what",
+            what,
+            "--out",
+            out_file.to_str().unwrap(),
+        ];
+        if !format.is_empty() {
+            args.extend(["--format", format]);
+        }
+        let (ok, _, err) = flatmesh_client(&base, &args);
+        assert!(ok, "{err}");
+        let path = match what {
+            "result" => format!("/v1/jobs/{id}/result"),
+            _ => format!("/v1/jobs/{id}/{what}?format={format}"),
+        };
+        let want = c
+            .get(s.url(&path))
+            .send()
+            .await
+            .unwrap()
+            .bytes()
+            .await
+            .unwrap();
+        assert_eq!(std::fs::read(&out_file).unwrap(), want.to_vec(), "{what}");
+    }
+    // multipart submit with a file, and a refused parameter reported with its field
+    let (ok, out, err) =
+        flatmesh_client(&base, &["submit", "report", "--mesh", "fixtures/cone.obj"]);
+    assert!(ok, "{err}");
+    let j: Value = serde_json::from_str(&out).unwrap();
+    check("Job", &j);
+    let (ok, _, err) = flatmesh_client(&base, &["wait", j["id"].as_str().unwrap()]);
+    assert!(ok, "{err}");
+    let (ok, _, err) = flatmesh_client(
+        &base,
+        &[
+            "submit",
+            "flatten",
+            "--mesh-id",
+            mid,
+            "--set",
+            "tolerance=7",
+        ],
+    );
+    assert!(!ok);
+    assert!(
+        err.contains("422") && err.contains("params.tolerance"),
+        "{err}"
+    );
+    let (ok, _, _) = flatmesh_client(&base, &["health"]);
+    assert!(ok);
+    drop(s);
+    let (ok, _, _) = flatmesh_client(&base, &["health"]);
+    assert!(!ok, "health fails when the server is gone");
+}
+
+/// Results expire after the retention; CORS and gzip are applied.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn retention_cors_compression() {
+    let s = Server::start(
+        &tmp("retention"),
+        &["--retention", "1s", "--cors-origin", "https://cad.example"],
+    );
+    let c = client();
+    let m = upload(&c, &s, fixture("cone")).await;
+    let j = submit(&c, &s, json!({"kind": "report", "mesh_id": m["id"]})).await;
+    let id = j["id"].as_str().unwrap();
+    let done = wait_for(&c, &s, id, &["succeeded"]).await;
+    assert!(done["expires_at"].is_string());
+    let t = Instant::now();
+    loop {
+        let r = c
+            .get(s.url(&format!("/v1/jobs/{id}")))
+            .send()
+            .await
+            .unwrap();
+        if r.status() == 404 {
+            break;
+        }
+        assert!(t.elapsed() < Duration::from_secs(10), "job not expired");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    assert!(
+        !s.dir.join(format!("blobs/jobs/{id}")).exists(),
+        "artifacts deleted"
+    );
+    let r = c
+        .get(s.url("/v1/jobs"))
+        .header("origin", "https://cad.example")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(
+        r.headers()["access-control-allow-origin"],
+        "https://cad.example"
+    );
+    let r = c
+        .get(s.url("/v1/jobs"))
+        .header("origin", "https://evil.example")
+        .send()
+        .await
+        .unwrap();
+    assert!(!r.headers().contains_key("access-control-allow-origin"));
+    let r = c
+        .get(s.url("/openapi.yaml"))
+        .header("accept-encoding", "gzip")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.headers()["content-encoding"], "gzip");
+    let gz = r.bytes().await.unwrap();
+    assert!(gz.len() < openapi_len(), "compressed {} bytes", gz.len());
+}
+
+fn openapi_len() -> usize {
+    std::fs::metadata("src/service/openapi.yaml").unwrap().len() as usize
+}
