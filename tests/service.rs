@@ -445,7 +445,10 @@ async fn meshes_upload_report_delete() {
 async fn every_kind_end_to_end() {
     let s = Server::start(&tmp("kinds"), &[]);
     let c = client();
-    assert_eq!(flatmesh::algorithms::KINDS, ["report", "flatten"]);
+    assert_eq!(
+        flatmesh::algorithms::KINDS,
+        ["report", "flatten", "fl-mesh"]
+    );
     let bytes = fixture("tube_two_panels");
     let (mesh, w) = flatmesh::io::load(&bytes, flatmesh::io::Format::Obj).unwrap();
     let m = upload(&c, &s, bytes.clone()).await;
@@ -604,6 +607,98 @@ async fn every_kind_end_to_end() {
     assert_eq!(pat["pieces"].as_array().unwrap().len(), 2);
     assert_eq!(pat["seams"].as_array().unwrap().len(), 2);
 
+    // fl-mesh on the noisy cone: the downloaded mesh is flattenable by the library's own
+    // measure, boundary vertices are where they were, and its patterns are isometric.
+    let cone = fixture("cone_noisy");
+    let (kmesh, _) = flatmesh::io::load(&cone, flatmesh::io::Format::Obj).unwrap();
+    let km = upload(&c, &s, cone).await;
+    let j = submit(
+        &c,
+        &s,
+        json!({"kind": "fl-mesh", "mesh_id": km["id"], "params": {"tolerance": 1e-7}}),
+    )
+    .await;
+    let id = j["id"].as_str().unwrap();
+    let done = wait_for(&c, &s, id, &["succeeded", "failed"]).await;
+    assert_eq!(done["status"], "succeeded", "{done}");
+    assert!(done["links"]["patterns"].is_string(), "{done}");
+    let result = json_of(
+        c.get(s.url(&format!("/v1/jobs/{id}/result")))
+            .send()
+            .await
+            .unwrap(),
+        "Report",
+    )
+    .await;
+    assert_eq!(result["converged"], true, "{result}");
+    assert!(result["iterations"].as_u64().unwrap() >= 1);
+    let b = c
+        .get(s.url(&format!("/v1/jobs/{id}/mesh?format=obj")))
+        .send()
+        .await
+        .unwrap()
+        .bytes()
+        .await
+        .unwrap();
+    let (out, _) = flatmesh::io::load(&b, flatmesh::io::Format::Obj).unwrap();
+    let theta = flatmesh::geometry::angle_sums(&out);
+    let varpi = flatmesh::geometry::flattenability(&out, &theta);
+    let worst = varpi.iter().cloned().fold(0.0, f64::max);
+    assert!(worst <= 1e-7, "downloaded fl-mesh output has ϖ_max {worst}");
+    let conn = kmesh.conn();
+    let mut moved = 0;
+    for v in 0..kmesh.num_vertices() {
+        if conn.is_interior(v as u32) {
+            moved += usize::from(out.positions()[v] != kmesh.positions()[v]);
+        } else {
+            assert_eq!(
+                out.positions()[v],
+                kmesh.positions()[v],
+                "boundary vertex {v} moved"
+            );
+        }
+    }
+    assert!(
+        moved > 0,
+        "the noisy cone is not flattenable, so interior vertices must move"
+    );
+    let pat = json_of(
+        c.get(s.url(&format!("/v1/jobs/{id}/patterns")))
+            .send()
+            .await
+            .unwrap(),
+        "Patterns",
+    )
+    .await;
+    let pos = out.positions();
+    let mut worst_rel = 0.0f64;
+    for piece in pat["pieces"].as_array().unwrap() {
+        let vid: Vec<usize> = piece["vertex_ids"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_u64().unwrap() as usize)
+            .collect();
+        let uv = piece["uv"].as_array().unwrap();
+        for t in piece["triangles"].as_array().unwrap() {
+            for k in 0..3 {
+                let a = t[k].as_u64().unwrap() as usize;
+                let b = t[(k + 1) % 3].as_u64().unwrap() as usize;
+                let d2 = (0..2)
+                    .map(|i| (uv[a][i].as_f64().unwrap() - uv[b][i].as_f64().unwrap()).powi(2))
+                    .sum::<f64>()
+                    .sqrt();
+                let (p, q) = (pos[vid[a]], pos[vid[b]]);
+                let d3 = (0..3).map(|i| (p[i] - q[i]).powi(2)).sum::<f64>().sqrt();
+                worst_rel = worst_rel.max((d2 - d3).abs() / d3);
+            }
+        }
+    }
+    assert!(
+        worst_rel < 1e-4,
+        "pattern of the fl-mesh output: edge error {worst_rel}"
+    );
+
     // multipart submit: job + mesh in one request
     let form = reqwest::multipart::Form::new()
         .part(
@@ -645,7 +740,7 @@ async fn every_kind_end_to_end() {
         "JobList",
     )
     .await;
-    assert_eq!(all["jobs"].as_array().unwrap().len(), 4);
+    assert_eq!(all["jobs"].as_array().unwrap().len(), 5);
     let fl = json_of(
         c.get(s.url("/v1/jobs?kind=flatten&status=succeeded"))
             .send()

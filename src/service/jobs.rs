@@ -426,8 +426,9 @@ impl Executor {
         };
         let input = algorithms::Input { mesh, reference };
         let start = Instant::now();
-        let outcome =
+        let mut outcome =
             (self.runner)(&job.kind, &input, &job.params, control).map_err(ExecError::Algo)?;
+        patterns_of_output(&mut outcome, control).map_err(ExecError::Algo)?;
         let seconds = start.elapsed().as_secs_f64();
         let mut names = Vec::new();
         let artifacts = io::artifacts::render(&input.mesh, &outcome, &warnings, seconds);
@@ -498,6 +499,40 @@ impl Executor {
 enum ExecError {
     Algo(AlgoError),
     Input(Problem),
+}
+
+/// `GET /v1/jobs/{id}/patterns` serves the patterns of the job's output mesh: a job that
+/// changes the mesh (fl-mesh, …) but does not flatten gets them from `flatten` with its
+/// defaults. When the output cannot be flattened the job still succeeds; the report says why
+/// under `patterns_unavailable`. Only cancellation propagates.
+fn patterns_of_output(
+    outcome: &mut algorithms::Outcome,
+    control: &dyn Control,
+) -> Result<(), AlgoError> {
+    let Some(mesh) = outcome.mesh.as_ref() else {
+        return Ok(());
+    };
+    if outcome.patterns.is_some() {
+        return Ok(());
+    }
+    match algorithms::flatten::run(mesh, &algorithms::flatten::Params::default(), control) {
+        Ok(flat) => {
+            outcome.patterns = flat.patterns;
+            if let Some(w) = flat.summary.get("job_warnings") {
+                if w.as_array().is_some_and(|a| !a.is_empty()) {
+                    outcome.summary.insert("pattern_warnings".into(), w.clone());
+                }
+            }
+            Ok(())
+        }
+        Err(AlgoError::Cancelled) => Err(AlgoError::Cancelled),
+        Err(e) => {
+            outcome
+                .summary
+                .insert("patterns_unavailable".into(), e.to_string().into());
+            Ok(())
+        }
+    }
 }
 
 #[cfg(test)]
