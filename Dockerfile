@@ -6,7 +6,8 @@ WORKDIR /src
 # Dependencies first, so that source edits do not rebuild them.
 COPY Cargo.toml Cargo.lock ./
 RUN mkdir -p src benches && echo 'fn main() {}' > src/main.rs && touch src/lib.rs \
-    && for b in report flatten; do echo 'fn main() {}' > benches/$b.rs; done \
+    && for b in $(awk '/^\[\[bench\]\]/{b=1; next} b && /^name/{gsub(/"/, "", $3); print $3; b=0}' Cargo.toml); \
+       do echo 'fn main() {}' > benches/$b.rs; done \
     && cargo build --release --locked --bin flatmesh || true
 COPY . .
 RUN touch src/main.rs src/lib.rs && cargo build --release --locked --bin flatmesh \
