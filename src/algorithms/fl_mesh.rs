@@ -17,6 +17,15 @@
 //!   triangle counts as infinite merit. When no trial decreases φ it falls back to τ. Since H is
 //!   the exact Jacobian of B_p and only λ·∇²θ is neglected, full steps are taken almost always
 //!   and ϖ_max falls quadratically near the end instead of by 0.75 per iteration.
+//! - Fairing weight (`until = "flattenable"` only). The tangential (fairing) part of the step
+//!   is halved whenever ϖ_max did not fall over an iteration. There the run stops at the first
+//!   flattenable iterate, so the fairing only shapes the path; on the t-shirt it otherwise kept
+//!   undoing the normal steps (ϖ_max oscillating near 5e-3). With `until = "stationary"` the
+//!   full step is kept, so the paper's stationary point (B = 0) is what is reached.
+//! - Shift. The (2,2) block is −μ I, μ from 1e-4 down to 1e-10: divided by 10 after a full
+//!   step, kept after a step of ≥ 1/4, multiplied by 10 only when the linearisation failed.
+//!   (Growing it on every shortened step held ϖ_max near 1e-2 on the t-shirt: the shifted
+//!   normal step leaves a residual of about μ·λ.)
 //! - Regularisation. The (2,2) block is −ε I with ε = 1e-10 (rows scaled by h̄ so that all
 //!   blocks are O(1)). A planar vertex has ∂θ = 0 (θ is stationary at 2π), which would make
 //!   Eq. 7 singular; the shift keeps it solvable and biases θ − 2π by at most ε·|λ|, far below
@@ -614,6 +623,11 @@ impl System {
         // larger when the linearisation of θ fails (near-planar fans, where ∂θ → 0 and the
         // Gauss–Newton correction blows up).
         let mut reg = REGULARISATION_START;
+        // Weight of the tangential (fairing) part with `until = flattenable`: halved whenever
+        // ϖ_max did not fall over an iteration, so that the fairing, which only shapes the
+        // path there, cannot keep undoing the normal steps (ends as pure Gauss–Newton).
+        let mut fair = 1.0f64;
+        let mut prev_wmax = f64::INFINITY;
         eval(
             &self.pos,
             tris,
@@ -676,6 +690,10 @@ impl System {
                     anchors[v as usize] = g.closest(self.pos[v as usize]).0;
                 }
             }
+            if params.until == Until::Flattenable && wmax >= prev_wmax {
+                fair *= 0.5;
+            }
+            prev_wmax = wmax;
             // Assemble Λ (Eq. 11–13), scaled by h̄ so that every block is O(1).
             let h = self.h;
             for r in 0..n {
@@ -741,11 +759,7 @@ impl System {
                     // The fairness part may ask to move far (the uniform Laplacian also
                     // redistributes vertices); its linearisation of θ is trusted over at most
                     // half a mean edge length per iteration.
-                    let s = if tan_norm > TANGENT_RADIUS {
-                        TANGENT_RADIUS / tan_norm
-                    } else {
-                        1.0
-                    };
+                    let s = fair * (TANGENT_RADIUS / tan_norm.max(TANGENT_RADIUS));
                     // Trials: the full normal step with the tangential one shrinking to
                     // nothing, then shorter normal steps. Accept the first that lowers the
                     // violation ‖2π − θ‖₂ by the Armijo rule (δ_n is a Gauss–Newton step on
@@ -801,10 +815,14 @@ impl System {
                             best = (w, (an, at * s));
                         }
                     }
-                    reg = if accepted == Some(1.0) {
-                        (reg * 0.1).max(REGULARISATION)
-                    } else {
-                        (reg * 10.0).min(REGULARISATION_MAX)
+                    // The shift biases the normal step's residual by about `reg`·λ, so it
+                    // must not ratchet up on every shortened step (on the t-shirt that held
+                    // ϖ_max near 1e-2): it shrinks after a full step, stays after a step of
+                    // ≥ 1/4, and grows only when the linearisation failed outright.
+                    reg = match accepted {
+                        Some(a) if a >= 1.0 => (reg * 0.1).max(REGULARISATION),
+                        Some(a) if a >= 0.25 => reg,
+                        _ => (reg * 10.0).min(REGULARISATION_MAX),
                     };
                     match accepted {
                         Some(a) => a,
