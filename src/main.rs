@@ -42,6 +42,11 @@ enum Command {
     /// flatten parameters: method=lpfb|lscm (lpfb), unit=mm|cm|m|in (drawing unit, mm),
     /// input_unit=mm|cm|m|in (the mesh's unit, m), max_iterations (200), tolerance (1e-5),
     /// svg_triangles=true|false (false).
+    ///
+    /// subdivide (Sec. 3 of Wang's FL meshes) also writes level_<k>.glb and level_<k>.obj for
+    /// every level; parameters: levels (1; or --levels), curves (or --curves), split_ratio
+    /// (0.5), first_order_runs (10), second_order_runs (100), flatten_levels=true|false
+    /// (true), fl_mesh={...} (the fl-mesh parameters used on each level).
     Run {
         /// Job kind.
         #[arg(value_parser = clap::builder::PossibleValuesParser::new(algorithms::KINDS))]
@@ -57,6 +62,14 @@ enum Command {
         /// A reference body mesh, for kinds that use one.
         #[arg(long, value_name = "MESH")]
         reference: Option<PathBuf>,
+        /// subdivide: number of levels (same as --set levels=N).
+        #[arg(long, value_name = "N")]
+        levels: Option<usize>,
+        /// subdivide: interpolation curves of boundary edges, a JSON file
+        /// `{"curves": [{"edge": [a, b], "points": [[x, y, z], ...]}, ...]}` (a, b input vertex
+        /// indices; the polyline runs from a to b).
+        #[arg(long, value_name = "CURVES.json")]
+        curves: Option<PathBuf>,
     },
     /// Write the procedural test meshes (known answers) as OBJ files into DIR.
     Fixtures {
@@ -79,7 +92,17 @@ fn main() -> ExitCode {
             out,
             set,
             reference,
-        } => run(&kind, &mesh, &out, &set, reference.as_deref()),
+            levels,
+            curves,
+        } => run(
+            &kind,
+            &mesh,
+            &out,
+            &set,
+            reference.as_deref(),
+            levels,
+            curves.as_deref(),
+        ),
         Command::Serve(cfg) => match flatmesh::service::serve(cfg) {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => {
@@ -195,8 +218,16 @@ impl Control for StderrProgress {
     }
 }
 
-fn run(kind: &str, mesh: &Path, out: &Path, sets: &[String], reference: Option<&Path>) -> ExitCode {
-    let params = match parse_sets(sets) {
+fn run(
+    kind: &str,
+    mesh: &Path,
+    out: &Path,
+    sets: &[String],
+    reference: Option<&Path>,
+    levels: Option<usize>,
+    curves: Option<&Path>,
+) -> ExitCode {
+    let params = match parse_sets(sets).and_then(|p| subdivide_options(kind, p, levels, curves)) {
         Ok(p) => p,
         Err(e) => {
             eprintln!("flatmesh: {e}");
@@ -242,7 +273,7 @@ fn run(kind: &str, mesh: &Path, out: &Path, sets: &[String], reference: Option<&
         return ExitCode::FAILURE;
     }
     for a in io::artifacts::render(&input.mesh, &outcome, &warnings, seconds) {
-        let path = out.join(a.name);
+        let path = out.join(&a.name);
         if let Err(e) = std::fs::write(&path, &a.bytes) {
             eprintln!("flatmesh: cannot write {}: {e}", path.display());
             return ExitCode::FAILURE;
@@ -250,4 +281,59 @@ fn run(kind: &str, mesh: &Path, out: &Path, sets: &[String], reference: Option<&
         println!("{}", path.display());
     }
     ExitCode::SUCCESS
+}
+
+/// `--levels` and `--curves` (subdivide only) folded into the parameters.
+fn subdivide_options(
+    kind: &str,
+    mut params: serde_json::Map<String, serde_json::Value>,
+    levels: Option<usize>,
+    curves: Option<&Path>,
+) -> Result<serde_json::Map<String, serde_json::Value>, String> {
+    if kind != "subdivide" {
+        if levels.is_some() {
+            return Err(format!("--levels is for `subdivide`, not `{kind}`"));
+        }
+        if curves.is_some() {
+            return Err(format!("--curves is for `subdivide`, not `{kind}`"));
+        }
+        return Ok(params);
+    }
+    if let Some(n) = levels {
+        if params.contains_key("levels") {
+            return Err("levels given twice (--levels and --set levels=…)".into());
+        }
+        params.insert("levels".into(), n.into());
+    }
+    if let Some(path) = curves {
+        if params.contains_key("curves") {
+            return Err("curves given twice (--curves and --set curves=…)".into());
+        }
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        let v: serde_json::Value = serde_json::from_str(&text)
+            .map_err(|e| format!("{}: not JSON: {e}", path.display()))?;
+        let list = match v {
+            serde_json::Value::Object(mut o) => match o.remove("curves") {
+                Some(l) if o.is_empty() => l,
+                Some(_) => {
+                    return Err(format!(
+                        "{}: unknown member(s) beside `curves`: {}",
+                        path.display(),
+                        o.keys().cloned().collect::<Vec<_>>().join(", ")
+                    ))
+                }
+                None => return Err(format!("{}: no `curves` member", path.display())),
+            },
+            serde_json::Value::Array(a) => serde_json::Value::Array(a),
+            _ => {
+                return Err(format!(
+                    "{}: expected {{\"curves\": [...]}}",
+                    path.display()
+                ))
+            }
+        };
+        params.insert("curves".into(), list);
+    }
+    Ok(params)
 }

@@ -447,7 +447,7 @@ async fn every_kind_end_to_end() {
     let c = client();
     assert_eq!(
         flatmesh::algorithms::KINDS,
-        ["report", "flatten", "fl-mesh"]
+        ["report", "flatten", "fl-mesh", "subdivide"]
     );
     let bytes = fixture("tube_two_panels");
     let (mesh, w) = flatmesh::io::load(&bytes, flatmesh::io::Format::Obj).unwrap();
@@ -699,6 +699,99 @@ async fn every_kind_end_to_end() {
         "pattern of the fl-mesh output: edge error {worst_rel}"
     );
 
+    // subdivide, one level, with a curve on a rim edge of the cone: level 1 downloadable in
+    // every format and flattenable; no level 2; a bad level is named.
+    let rim = kmesh.conn().boundary_loops()[0].clone();
+    let (a, b) = (rim[0], rim[1]);
+    let (pa, pb) = (kmesh.position(a), kmesh.position(b));
+    let j = submit(
+        &c,
+        &s,
+        json!({"kind": "subdivide", "mesh_id": km["id"], "params": {
+            "levels": 1,
+            "curves": [{"edge": [a, b], "points": [pa, pb]}],
+            "fl_mesh": {"max_iterations": 100}
+        }}),
+    )
+    .await;
+    let id = j["id"].as_str().unwrap();
+    let done = wait_for(&c, &s, id, &["succeeded", "failed"]).await;
+    assert_eq!(done["status"], "succeeded", "{done}");
+    let result = json_of(
+        c.get(s.url(&format!("/v1/jobs/{id}/result")))
+            .send()
+            .await
+            .unwrap(),
+        "Report",
+    )
+    .await;
+    assert_eq!(result["levels"].as_array().unwrap().len(), 1, "{result}");
+    for (f, fmt) in [
+        ("obj", flatmesh::io::Format::Obj),
+        ("glb", flatmesh::io::Format::Glb),
+        ("gltf", flatmesh::io::Format::Gltf),
+    ] {
+        let r = c
+            .get(s.url(&format!("/v1/jobs/{id}/mesh?level=1&format={f}")))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 200, "level 1 as {f}");
+        let (lv, _) = flatmesh::io::load(&r.bytes().await.unwrap(), fmt).unwrap();
+        assert!(lv.num_vertices() > kmesh.num_vertices());
+        if f == "obj" {
+            let theta = flatmesh::geometry::angle_sums(&lv);
+            let w = flatmesh::geometry::flattenability(&lv, &theta)
+                .into_iter()
+                .fold(0.0, f64::max);
+            assert!(w <= 1e-6, "level 1 ϖ_max {w}");
+            assert_eq!(
+                result["levels"][0]["vertices"].as_u64().unwrap() as usize,
+                lv.num_vertices()
+            );
+        }
+    }
+    problem(
+        c.get(s.url(&format!("/v1/jobs/{id}/mesh?level=2")))
+            .send()
+            .await
+            .unwrap(),
+        404,
+    )
+    .await;
+    let p = problem(
+        c.get(s.url(&format!("/v1/jobs/{id}/mesh?level=zero")))
+            .send()
+            .await
+            .unwrap(),
+        422,
+    )
+    .await;
+    assert_eq!(p["field"], "level");
+    // A curve on an interior edge can only be judged against the mesh: the job fails with a
+    // 422 problem naming the curve.
+    let v = kmesh.conn().interior_vertices().next().unwrap();
+    let w = kmesh.conn().ring_of(v)[0];
+    let j = submit(
+        &c,
+        &s,
+        json!({"kind": "subdivide", "mesh_id": km["id"], "params": {
+            "curves": [{"edge": [v, w], "points": [kmesh.position(v), kmesh.position(w)]}]
+        }}),
+    )
+    .await;
+    let done = wait_for(&c, &s, j["id"].as_str().unwrap(), &["succeeded", "failed"]).await;
+    assert_eq!(done["status"], "failed", "{done}");
+    assert_eq!(done["error"]["status"], 422, "{done}");
+    assert_eq!(done["error"]["field"], "params.curves[0].edge", "{done}");
+    assert!(
+        done["error"]["detail"]
+            .as_str()
+            .unwrap()
+            .contains("curves[0].edge"),
+        "{done}"
+    );
+
     // multipart submit: job + mesh in one request
     let form = reqwest::multipart::Form::new()
         .part(
@@ -740,7 +833,7 @@ async fn every_kind_end_to_end() {
         "JobList",
     )
     .await;
-    assert_eq!(all["jobs"].as_array().unwrap().len(), 5);
+    assert_eq!(all["jobs"].as_array().unwrap().len(), 7);
     let fl = json_of(
         c.get(s.url("/v1/jobs?kind=flatten&status=succeeded"))
             .send()

@@ -286,6 +286,7 @@ pub fn run(mesh: &Mesh, params: &Params, control: &dyn Control) -> Result<Outcom
         mesh: Some(out),
         patterns: None,
         summary,
+        levels: Vec::new(),
     })
 }
 

@@ -7,6 +7,7 @@
 pub mod fl_mesh;
 pub mod flatten;
 pub mod report_job;
+pub mod subdivide;
 
 use crate::mesh::Mesh;
 use serde::de::DeserializeOwned;
@@ -73,7 +74,7 @@ pub enum AlgoError {
 }
 
 /// The job kinds implemented, in the order the CLI lists them.
-pub const KINDS: &[&str] = &["report", "flatten", "fl-mesh"];
+pub const KINDS: &[&str] = &["report", "flatten", "fl-mesh", "subdivide"];
 
 /// What a run produced: an output mesh (for optimisers), and a JSON object of
 /// algorithm-specific figures (iterations, converged, history, …) merged into `report.json`.
@@ -85,6 +86,9 @@ pub struct Outcome {
     pub patterns: Option<crate::pattern::Patterns>,
     /// Extra figures, a JSON object.
     pub summary: serde_json::Map<String, serde_json::Value>,
+    /// Intermediate meshes, for algorithms that make a sequence (`subdivide`: every level's
+    /// mesh, the last equal to `mesh`).
+    pub levels: Vec<Mesh>,
 }
 
 /// Everything a job needs.
@@ -101,27 +105,13 @@ pub struct Input {
 pub fn parse_params<P: DeserializeOwned>(
     params: &serde_json::Map<String, serde_json::Value>,
 ) -> Result<P, AlgoError> {
-    serde_json::from_value(serde_json::Value::Object(params.clone())).map_err(|e| {
-        let msg = e.to_string();
-        // serde_json says "unknown field `foo`, expected …" or "invalid type: … for key `x`"
-        // depending on the error; pull the key out when it names one.
-        let named = msg
-            .split('`')
-            .nth(1)
-            .filter(|_| msg.starts_with("unknown field") || msg.starts_with("missing field"));
-        // A bad value ("unknown variant `foo`", "invalid type") does not say whose: find the
-        // key that fails on its own (every parameter has a default, so one key parses alone).
-        let key = match named {
-            Some(k) => k.to_string(),
-            None => params
-                .iter()
-                .find(|(k, v)| {
-                    let one = serde_json::Map::from_iter([((*k).clone(), (*v).clone())]);
-                    serde_json::from_value::<P>(serde_json::Value::Object(one)).is_err()
-                })
-                .map(|(k, _)| k.clone())
-                .unwrap_or_default(),
-        };
+    let value = serde_json::Value::Object(params.clone());
+    serde_path_to_error::deserialize(value).map_err(|e| {
+        // The path names the member at fault (`levels`, `curves[0].edge`, `fl_mesh.nope` for
+        // an unknown nested field); "." is the object itself.
+        let path = e.path().to_string();
+        let msg = e.inner().to_string();
+        let key = if path == "." { String::new() } else { path };
         AlgoError::InvalidParam { key, message: msg }
     })
 }
@@ -135,6 +125,7 @@ pub fn validate(
         "report" => parse_params::<report_job::Params>(params).map(|_| ()),
         "flatten" => parse_params::<flatten::Params>(params)?.check(),
         "fl-mesh" => parse_params::<fl_mesh::Params>(params)?.check(),
+        "subdivide" => parse_params::<subdivide::Params>(params)?.check(),
         other => Err(AlgoError::UnknownKind(other.to_string())),
     }
 }
@@ -150,6 +141,7 @@ pub fn run(
         "report" => report_job::run(&input.mesh, &parse_params(params)?, control),
         "flatten" => flatten::run(&input.mesh, &parse_params(params)?, control),
         "fl-mesh" => fl_mesh::run(&input.mesh, &parse_params(params)?, control),
+        "subdivide" => subdivide::run(&input.mesh, &parse_params(params)?, control),
         other => Err(AlgoError::UnknownKind(other.to_string())),
     }
 }

@@ -1,5 +1,6 @@
 //! Turn a job's outcome into the files a user downloads: `report.json`, `mesh.glb`,
-//! `mesh.obj`, and for flattening `patterns.json`, `patterns.svg`, `patterns.dxf`. The CLI writes them into a directory; the service stores them. Both go through
+//! `mesh.obj`, for flattening `patterns.json`, `patterns.svg`, `patterns.dxf`, and for
+//! `subdivide` every level's `level_<k>.glb` and `level_<k>.obj`. The CLI writes them into a directory; the service stores them. Both go through
 //! here so the two never disagree.
 
 use crate::algorithms::Outcome;
@@ -10,7 +11,7 @@ use crate::report::Report;
 #[derive(Debug, Clone)]
 pub struct Artifact {
     /// File name (`report.json`, `mesh.glb`, …).
-    pub name: &'static str,
+    pub name: String,
     /// Media type.
     pub media_type: &'static str,
     /// Contents.
@@ -43,36 +44,51 @@ pub fn render(
     let value = job_report(&report, outcome, seconds);
     let mut out = vec![
         Artifact {
-            name: "report.json",
+            name: "report.json".into(),
             media_type: "application/json",
             bytes: serde_json::to_vec_pretty(&value).unwrap_or_default(),
         },
         Artifact {
-            name: "mesh.glb",
+            name: "mesh.glb".into(),
             media_type: "model/gltf-binary",
             bytes: super::gltf::write_glb(mesh, Some(&varpi)),
         },
         Artifact {
-            name: "mesh.obj",
+            name: "mesh.obj".into(),
             media_type: "model/obj",
             bytes: super::obj::write(&mesh.to_raw()).into_bytes(),
         },
     ];
     if let Some(p) = &outcome.patterns {
         out.push(Artifact {
-            name: "patterns.json",
+            name: "patterns.json".into(),
             media_type: "application/json",
             bytes: super::pattern::to_json(p).into_bytes(),
         });
         out.push(Artifact {
-            name: "patterns.svg",
+            name: "patterns.svg".into(),
             media_type: "image/svg+xml",
             bytes: super::pattern::to_svg(p).into_bytes(),
         });
         out.push(Artifact {
-            name: "patterns.dxf",
+            name: "patterns.dxf".into(),
             media_type: "image/vnd.dxf",
             bytes: super::pattern::to_dxf(p).into_bytes(),
+        });
+    }
+    // `subdivide`: every level's mesh as `level_<k>.glb` / `level_<k>.obj` (k from 1).
+    for (k, level) in outcome.levels.iter().enumerate() {
+        let theta = crate::geometry::angle_sums(level);
+        let varpi = crate::geometry::flattenability(level, &theta);
+        out.push(Artifact {
+            name: format!("level_{}.glb", k + 1),
+            media_type: "model/gltf-binary",
+            bytes: super::gltf::write_glb(level, Some(&varpi)),
+        });
+        out.push(Artifact {
+            name: format!("level_{}.obj", k + 1),
+            media_type: "model/obj",
+            bytes: super::obj::write(&level.to_raw()).into_bytes(),
         });
     }
     out

@@ -781,7 +781,19 @@ pub async fn job_mesh(
         "gltf" => "model/gltf+json",
         _ => "model/obj",
     };
-    let name = format!("mesh.{f}");
+    // `?level=k`: level k's mesh of a `subdivide` job (404 when the job has no such level).
+    let name = match q.get("level") {
+        None => format!("mesh.{f}"),
+        Some(l) => match l.parse::<u32>() {
+            Ok(k) if k >= 1 => format!("level_{k}.{f}"),
+            _ => {
+                return Err(Problem::invalid(
+                    "level",
+                    format!("`{l}` is not a level number (1, 2, …)"),
+                ))
+            }
+        },
+    };
     artifact(&st, &id, &name, media).await
 }
 

@@ -447,6 +447,18 @@ impl Executor {
             .put_blob(&format!("jobs/{}/mesh.gltf", job.id), &gltf)
             .map_err(|e| ExecError::Input(e.into()))?;
         names.push("mesh.gltf".into());
+        for (k, level) in outcome.levels.iter().enumerate() {
+            let theta = crate::geometry::angle_sums(level);
+            let varpi = crate::geometry::flattenability(level, &theta);
+            let name = format!("level_{}.gltf", k + 1);
+            self.store
+                .put_blob(
+                    &format!("jobs/{}/{name}", job.id),
+                    &io::gltf::write_gltf(level, Some(&varpi)),
+                )
+                .map_err(|e| ExecError::Input(e.into()))?;
+            names.push(name);
+        }
         Ok(names)
     }
 

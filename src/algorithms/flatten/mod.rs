@@ -580,5 +580,6 @@ pub fn run(mesh: &Mesh, params: &Params, control: &dyn Control) -> Result<Outcom
         mesh: None,
         patterns: Some(patterns),
         summary,
+        levels: Vec::new(),
     })
 }
