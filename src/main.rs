@@ -42,6 +42,11 @@ enum Command {
     /// flatten parameters: method=lpfb|lscm (lpfb), unit=mm|cm|m|in (drawing unit, mm),
     /// input_unit=mm|cm|m|in (the mesh's unit, m), max_iterations (200), tolerance (1e-5),
     /// svg_triangles=true|false (false).
+    ///
+    /// fl-mesh parameters: w1 (1), w2 (0.1), tau (0.25), step_rule=merit|fixed (merit),
+    /// anchor=input|closest (input), until=flattenable|stationary (flattenable), tolerance
+    /// (1e-6 rad), step_tolerance (1e-5), max_iterations (200), refine=true|false (true),
+    /// max_refinements (3), stall_iterations (8), linear_solver=ldlt|lu (ldlt).
     Run {
         /// Job kind.
         #[arg(value_parser = clap::builder::PossibleValuesParser::new(algorithms::KINDS))]

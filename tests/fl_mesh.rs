@@ -156,7 +156,10 @@ fn tshirt_cut_short_ends_honestly() {
         }
     }
     assert!(!conv, "5 iterations were enough?");
-    assert_eq!(out.summary["stop_reason"], serde_json::json!("max_iterations"));
+    assert_eq!(
+        out.summary["stop_reason"],
+        serde_json::json!("max_iterations")
+    );
     assert!(out.summary["iterations"].as_u64().unwrap() <= 5);
 }
 
