@@ -562,7 +562,7 @@ impl System {
         }
         let kkt = |e: crate::linalg::LinalgError| AlgoError::Input(format!("KKT system: {e}"));
         let lu = match params.linear_solver {
-            LinearSolver::Lu => Factor::Lu(LuSolver::new(4 * n, &entries).map_err(kkt)?),
+            LinearSolver::Lu => Factor::Lu(Box::new(LuSolver::new(4 * n, &entries).map_err(kkt)?)),
             LinearSolver::Ldlt => {
                 let signs = (0..4 * n).map(|i| if i < 3 * n { 1 } else { -1 }).collect();
                 Factor::Ldlt(Box::new(
@@ -995,7 +995,7 @@ impl System {
 }
 
 enum Factor {
-    Lu(LuSolver),
+    Lu(Box<LuSolver>),
     Ldlt(Box<LdltSolver>),
 }
 
