@@ -46,7 +46,7 @@ enum Command {
     /// fl-mesh parameters: w1 (1), w2 (0.1), tau (0.25), step_rule=merit|fixed (merit),
     /// anchor=input|closest (input), until=flattenable|stationary (flattenable), tolerance
     /// (1e-6 rad), step_tolerance (1e-5), max_iterations (200), refine=true|false (true),
-    /// max_refinements (3), stall_iterations (8), linear_solver=ldlt|lu (ldlt).
+    /// max_refinements (3), stall_iterations (16), linear_solver=ldlt|lu (ldlt).
     Run {
         /// Job kind.
         #[arg(value_parser = clap::builder::PossibleValuesParser::new(algorithms::KINDS))]

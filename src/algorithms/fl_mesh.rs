@@ -153,7 +153,7 @@ impl Default for Params {
             max_iterations: 200,
             refine: true,
             max_refinements: 3,
-            stall_iterations: 8,
+            stall_iterations: 16,
             linear_solver: LinearSolver::Ldlt,
         }
     }
