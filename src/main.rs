@@ -43,6 +43,11 @@ enum Command {
     /// input_unit=mm|cm|m|in (the mesh's unit, m), max_iterations (200), tolerance (1e-5),
     /// svg_triangles=true|false (false).
     ///
+    /// fl-mesh parameters: w1 (1), w2 (0.1), tau (0.25), step_rule=merit|fixed (merit),
+    /// anchor=input|closest (input), until=flattenable|stationary (flattenable), tolerance
+    /// (1e-6 rad), step_tolerance (1e-5), max_iterations (200), refine=true|false (true),
+    /// max_refinements (3), stall_iterations (16), linear_solver=ldlt|lu (ldlt).
+    ///
     /// subdivide (Sec. 3 of Wang's FL meshes) also writes level_<k>.glb and level_<k>.obj for
     /// every level; parameters: levels (1; or --levels), curves (or --curves), split_ratio
     /// (0.5), first_order_runs (10), second_order_runs (100), flatten_levels=true|false

@@ -5,9 +5,9 @@
 //! Unknowns are the positions of the interior vertices (whole closed fan in one patch);
 //! boundary and seam vertices are never written, so they stay bit-identical. Each iteration
 //! assembles Eq. 7 with H of Eq. 10 (w1 = 1, w2 = 0.1 by default), B_p of Eq. 8, B_λ of Eq. 9
-//! and Λ = ∂θ/∂v of Eq. 11 from Propositions 1 and 2, factors it with faer's sparse LU (the
-//! symbolic factorisation is computed once per mesh, only the numeric one every iteration) and
-//! solves for δ and λ.
+//! and Λ = ∂θ/∂v of Eq. 11 from Propositions 1 and 2, factors it (faer's sparse LDLᵀ of the
+//! quasi-definite system by default, or its sparse LU; the symbolic factorisation is computed
+//! once per mesh, only the numeric one every iteration) and solves for δ and λ.
 //!
 //! Beyond the paper:
 //! - Step length. The paper always moves by τδ with τ = 0.25 (`step_rule = "fixed"` does
@@ -153,7 +153,7 @@ impl Default for Params {
             max_iterations: 200,
             refine: true,
             max_refinements: 3,
-            stall_iterations: 8,
+            stall_iterations: 16,
             linear_solver: LinearSolver::Ldlt,
         }
     }
@@ -563,7 +563,7 @@ impl System {
         }
         let kkt = |e: crate::linalg::LinalgError| AlgoError::Input(format!("KKT system: {e}"));
         let lu = match params.linear_solver {
-            LinearSolver::Lu => Factor::Lu(LuSolver::new(4 * n, &entries).map_err(kkt)?),
+            LinearSolver::Lu => Factor::Lu(Box::new(LuSolver::new(4 * n, &entries).map_err(kkt)?)),
             LinearSolver::Ldlt => {
                 let signs = (0..4 * n).map(|i| if i < 3 * n { 1 } else { -1 }).collect();
                 Factor::Ldlt(Box::new(
@@ -996,7 +996,7 @@ impl System {
 }
 
 enum Factor {
-    Lu(LuSolver),
+    Lu(Box<LuSolver>),
     Ldlt(Box<LdltSolver>),
 }
 
