@@ -230,6 +230,50 @@ fn routes_and_openapi_agree() {
     // The served document is the file.
 }
 
+/// The defaults openapi.yaml documents are the code's: every kind's `Params::default()`,
+/// serialised, has exactly the schema's properties, each with the documented default.
+#[test]
+fn openapi_parameter_defaults_are_the_code_defaults() {
+    use flatmesh::algorithms::{fl_mesh, flatten, subdivide};
+    let doc = openapi();
+    let schemas = &doc["components"]["schemas"];
+    let cases = [
+        (
+            "FlattenParams",
+            serde_json::to_value(flatten::Params::default()).unwrap(),
+        ),
+        (
+            "FlMeshParams",
+            serde_json::to_value(fl_mesh::Params::default()).unwrap(),
+        ),
+        (
+            "SubdivideParams",
+            serde_json::to_value(subdivide::Params::default()).unwrap(),
+        ),
+    ];
+    for (name, code) in cases {
+        let props = schemas[name]["properties"].as_object().unwrap();
+        let code = code.as_object().unwrap();
+        let mut a: Vec<&String> = props.keys().collect();
+        let mut b: Vec<&String> = code.keys().collect();
+        a.sort();
+        b.sort();
+        assert_eq!(a, b, "{name}: properties vs the Params struct");
+        for (k, v) in code {
+            let Some(d) = props[k].get("default") else {
+                // Nested objects and lists document their own defaults.
+                assert!(v.is_object() || v.is_array(), "{name}.{k} has no default");
+                continue;
+            };
+            match (d.as_f64(), v.as_f64()) {
+                (Some(x), Some(y)) => assert_eq!(x, y, "{name}.{k}"),
+                _ => assert_eq!(d, v, "{name}.{k}"),
+            }
+        }
+        check(name, &Value::Object(code.clone()));
+    }
+}
+
 /// Standard Webhooks' published example (svix): the signature must match bit for bit.
 #[test]
 fn webhook_signature_matches_standard_example() {

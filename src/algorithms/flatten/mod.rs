@@ -78,7 +78,7 @@ fn default_tolerance() -> f64 {
 }
 
 /// Parameters of `flatten`; unknown keys are refused.
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct Params {
     /// `lpfb` (default) or `lscm`.
