@@ -125,8 +125,8 @@ fn check_run(name: &str, sets: &[&str]) -> usize {
         // √3 refinement of an interior fan appends one vertex per fan triangle, inside the
         // surface.
         assert!(out.num_vertices() > inp.num_vertices());
-        for v in inp.num_vertices()..out.num_vertices() {
-            assert_eq!(ko[v], VertexKind::Interior, "appended vertex {v}");
+        for (v, k) in ko.iter().enumerate().skip(inp.num_vertices()) {
+            assert_eq!(*k, VertexKind::Interior, "appended vertex {v}");
         }
     }
     for v in 0..inp.num_vertices() {
