@@ -340,9 +340,7 @@ fn bad_parameters_are_named() {
                     mesh: m.clone(),
                     reference: None,
                 };
-                algorithms::run("subdivide", &input, &map, &Silent::default())
-                    .err()
-                    .expect("refused")
+                algorithms::run("subdivide", &input, &map, &Silent::default()).expect_err("refused")
             }
         };
         match err {
