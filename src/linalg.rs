@@ -1,7 +1,7 @@
-//! Thin wrappers over faer's sparse LU: a fixed sparsity pattern assembled once from
-//! (row, column) pairs, whose values are refilled every iteration in the same order, and a
-//! solver that computes the symbolic factorisation once and only the numeric one afterwards
-//! (../shared/CRATES.md: the pattern of the FL-mesh KKT system never changes).
+//! Thin wrappers over faer's sparse LU and LDLᵀ: a fixed sparsity pattern assembled once from
+//! (row, column) pairs, whose values are refilled every iteration in the same order, and
+//! solvers that compute the ordering and symbolic factorisation once and only the numeric one
+//! afterwards (../shared/CRATES.md: the pattern of the FL-mesh KKT system never changes).
 
 use faer::linalg::solvers::Solve;
 use faer::sparse::linalg::solvers::{Lu, SymbolicLu};
@@ -101,14 +101,24 @@ impl LuSolver {
 }
 
 /// A symmetric quasi-definite matrix (positive definite (1,1) block, negative definite (2,2)
-/// block) factored as LDLᵀ with a fill-reducing AMD ordering computed once. Only the lower
+/// block) factored as LDLᵀ with a fill-reducing ordering computed once. Only the lower
 /// triangle of the pattern is read; `signs` gives the expected sign of each pivot (+1 for the
 /// (1,1) block, −1 for the (2,2) block) so that a pivot that comes out tiny or of the wrong
 /// sign is regularised instead of breaking the factorisation.
+///
+/// The ordering is AMD, either on the whole matrix or, when unknowns come in groups that
+/// share their couplings (x, y, z and λ of one vertex), on the graph of the groups with each
+/// group kept together. On the FL-mesh KKT system of ipc_skirt4K (14k unknowns) the grouped
+/// ordering is 4× cheaper to compute and its factor 3% sparser and ~10% faster to compute.
+/// Values are scattered straight into a lower-triangular CSC array whose positions are worked
+/// out once, so refactoring allocates nothing.
 pub struct LdltSolver {
     n: usize,
+    /// Lower-triangular pattern (sorted, no duplicates).
     symbolic: SymbolicSparseColMat<usize>,
-    argsort: Argsort<usize>,
+    /// For each input entry, its slot in `csc_values` (`usize::MAX` above the diagonal).
+    slot: Vec<usize>,
+    csc_values: Vec<f64>,
     chol: faer::sparse::linalg::cholesky::SymbolicCholesky<usize>,
     l_values: Vec<f64>,
     signs: Vec<i8>,
@@ -122,10 +132,20 @@ impl std::fmt::Debug for LdltSolver {
     }
 }
 
+/// Most right-hand sides one `solve_many_in_place` call takes (its scratch is sized for them).
+pub const MAX_RHS: usize = 4;
+
 impl LdltSolver {
-    /// Pattern from `(row, col)` pairs (entries above the diagonal are ignored in the
-    /// factorisation but may be given) and the symbolic factorisation, once.
-    pub fn new(n: usize, entries: &[(usize, usize)], signs: Vec<i8>) -> Result<Self, LinalgError> {
+    /// Pattern from `(row, col)` pairs (entries above the diagonal are ignored but may be
+    /// given; repeated pairs are summed) and the symbolic factorisation, once. `groups`, when
+    /// given, holds a group id per unknown (ids `0..g`, every id used): the ordering then
+    /// keeps each group's unknowns together.
+    pub fn new(
+        n: usize,
+        entries: &[(usize, usize)],
+        signs: Vec<i8>,
+        groups: Option<&[u32]>,
+    ) -> Result<Self, LinalgError> {
         use faer::sparse::linalg::cholesky::{factorize_symbolic_cholesky, SymmetricOrdering};
         if signs.len() != n {
             return Err(LinalgError::Pattern(format!(
@@ -133,30 +153,78 @@ impl LdltSolver {
                 signs.len()
             )));
         }
-        let pairs: Vec<Pair<usize, usize>> = entries
-            .iter()
-            .map(|&(row, col)| Pair { row, col })
-            .collect();
-        let (symbolic, argsort) = SymbolicSparseColMat::try_new_from_indices(n, n, &pairs)
-            .map_err(|e| LinalgError::Pattern(format!("{e:?}")))?;
+        if let Some(&(r, c)) = entries.iter().find(|&&(r, c)| r >= n || c >= n) {
+            return Err(LinalgError::Pattern(format!(
+                "entry ({r}, {c}) outside a {n}×{n} matrix"
+            )));
+        }
+        // Lower triangle in CSC order: bucket by column (counting sort), sort each column's
+        // few rows, remember every entry's slot.
+        let mut count = vec![0usize; n + 1];
+        for &(r, c) in entries {
+            if r >= c {
+                count[c + 1] += 1;
+            }
+        }
+        for c in 0..n {
+            count[c + 1] += count[c];
+        }
+        let mut order = vec![0usize; count[n]];
+        let mut next = count.clone();
+        for (k, &(r, c)) in entries.iter().enumerate() {
+            if r >= c {
+                order[next[c]] = k;
+                next[c] += 1;
+            }
+        }
+        let mut slot = vec![usize::MAX; entries.len()];
+        let mut col_ptr = vec![0usize; n + 1];
+        let mut row_idx: Vec<usize> = Vec::with_capacity(order.len());
+        for c in 0..n {
+            let col = &mut order[count[c]..count[c + 1]];
+            col.sort_unstable_by_key(|&k| entries[k].0);
+            let mut last = usize::MAX;
+            for &k in col.iter() {
+                let r = entries[k].0;
+                if r != last {
+                    row_idx.push(r);
+                    last = r;
+                }
+                slot[k] = row_idx.len() - 1;
+            }
+            col_ptr[c + 1] = row_idx.len();
+        }
+        let nnz = row_idx.len();
+        let symbolic = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
+        let perm = match groups {
+            None => None,
+            Some(g) => Some(group_amd(n, entries, g)?),
+        };
+        let ordering = match &perm {
+            None => SymmetricOrdering::Amd,
+            Some((fwd, inv)) => {
+                SymmetricOrdering::Custom(faer::perm::PermRef::new_checked(fwd, inv, n))
+            }
+        };
         let chol = factorize_symbolic_cholesky(
             symbolic.as_ref(),
             faer::Side::Lower,
-            SymmetricOrdering::Amd,
+            ordering,
             Default::default(),
         )
         .map_err(|e| LinalgError::Factor(format!("{e:?}")))?;
         let par = faer::Par::Seq;
         let req = chol
             .factorize_numeric_ldlt_scratch::<f64>(par, Default::default())
-            .or(chol.solve_in_place_scratch::<f64>(1, par));
+            .or(chol.solve_in_place_scratch::<f64>(MAX_RHS, par));
         let mem = faer::dyn_stack::MemBuffer::try_new(req)
             .map_err(|e| LinalgError::Factor(format!("{e:?}")))?;
         let l_values = vec![0.0; chol.len_val()];
         Ok(Self {
             n,
             symbolic,
-            argsort,
+            slot,
+            csc_values: vec![0.0; nnz],
             chol,
             l_values,
             signs,
@@ -165,14 +233,27 @@ impl LdltSolver {
         })
     }
 
-    /// Numeric LDLᵀ of the matrix with `values[k]` at `entries[k]`.
+    /// Numeric factorisation for `values` (in the order of the constructor's `entries`).
     pub fn factor(&mut self, values: &[f64]) -> Result<(), LinalgError> {
         use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
+        self.factored = false;
+        if values.len() != self.slot.len() {
+            return Err(LinalgError::Pattern(format!(
+                "{} values for {} entries",
+                values.len(),
+                self.slot.len()
+            )));
+        }
         if values.iter().any(|v| !v.is_finite()) {
             return Err(LinalgError::NonFinite);
         }
-        let a = SparseColMat::new_from_argsort(self.symbolic.clone(), &self.argsort, values)
-            .map_err(|e| LinalgError::Factor(format!("{e:?}")))?;
+        self.csc_values.fill(0.0);
+        for (&s, &v) in self.slot.iter().zip(values) {
+            if s != usize::MAX {
+                self.csc_values[s] += v;
+            }
+        }
+        let a = faer::sparse::SparseColMatRef::new(self.symbolic.as_ref(), &self.csc_values);
         let reg = LdltRegularization {
             dynamic_regularization_signs: Some(&self.signs),
             dynamic_regularization_delta: 1e-10,
@@ -182,7 +263,7 @@ impl LdltSolver {
         self.chol
             .factorize_numeric_ldlt(
                 &mut self.l_values,
-                a.as_ref(),
+                a,
                 faer::Side::Lower,
                 reg,
                 faer::Par::Seq,
@@ -194,14 +275,20 @@ impl LdltSolver {
         Ok(())
     }
 
-    /// Solve in place with the last factorisation.
+    /// Solve with the last factorisation; `rhs` is overwritten by the solution.
     pub fn solve_in_place(&mut self, rhs: &mut [f64]) -> Result<(), LinalgError> {
+        self.solve_many_in_place(rhs, 1)
+    }
+
+    /// Solve for `k` right-hand sides stored one after another (column-major, `k ≤ MAX_RHS`)
+    /// in one pass over the factor.
+    pub fn solve_many_in_place(&mut self, rhs: &mut [f64], k: usize) -> Result<(), LinalgError> {
         if !self.factored {
             return Err(LinalgError::Factor("solve before factor".into()));
         }
-        if rhs.len() != self.n {
+        if k == 0 || k > MAX_RHS || rhs.len() != self.n * k {
             return Err(LinalgError::Pattern(format!(
-                "right-hand side of length {} for dimension {}",
+                "right-hand side of length {} for dimension {} and {k} column(s) (at most {MAX_RHS})",
                 rhs.len(),
                 self.n
             )));
@@ -210,7 +297,7 @@ impl LdltSolver {
             &self.chol,
             &self.l_values,
         );
-        let m = faer::MatMut::from_column_major_slice_mut(rhs, self.n, 1);
+        let m = faer::MatMut::from_column_major_slice_mut(rhs, self.n, k);
         let stack = faer::dyn_stack::MemStack::new(&mut self.mem);
         ldlt.solve_in_place_with_conj(faer::Conj::No, m, faer::Par::Seq, stack);
         if rhs.iter().any(|v| !v.is_finite()) {
@@ -218,6 +305,104 @@ impl LdltSolver {
         }
         Ok(())
     }
+}
+
+/// AMD on the quotient graph of `groups` (two groups adjacent when an entry couples them),
+/// expanded so that each group's unknowns stay together in increasing order: (forward,
+/// inverse) permutation of `0..n`.
+fn group_amd(
+    n: usize,
+    entries: &[(usize, usize)],
+    groups: &[u32],
+) -> Result<(Vec<usize>, Vec<usize>), LinalgError> {
+    if groups.len() != n {
+        return Err(LinalgError::Pattern(format!(
+            "{} group ids for dimension {n}",
+            groups.len()
+        )));
+    }
+    let g = groups.iter().map(|&x| x as usize + 1).max().unwrap_or(0);
+    let mut size = vec![0usize; g];
+    for &x in groups {
+        size[x as usize] += 1;
+    }
+    if let Some(empty) = size.iter().position(|&c| c == 0) {
+        return Err(LinalgError::Pattern(format!(
+            "group {empty} has no unknown"
+        )));
+    }
+    // Quotient graph, both triangles, no diagonal: bucket the coupled pairs by column, then
+    // drop repeats with a marker (no sort needed: AMD takes unsorted columns).
+    let mut count = vec![0usize; g + 1];
+    for &(r, c) in entries {
+        let (a, b) = (groups[r] as usize, groups[c] as usize);
+        if a != b {
+            count[a + 1] += 1;
+            count[b + 1] += 1;
+        }
+    }
+    for x in 0..g {
+        count[x + 1] += count[x];
+    }
+    let mut bucket = vec![0usize; count[g]];
+    let mut next = count.clone();
+    for &(r, c) in entries {
+        let (a, b) = (groups[r] as usize, groups[c] as usize);
+        if a != b {
+            bucket[next[a]] = b;
+            next[a] += 1;
+            bucket[next[b]] = a;
+            next[b] += 1;
+        }
+    }
+    let mut seen = vec![usize::MAX; g];
+    let mut col_ptr = vec![0usize; g + 1];
+    let mut row_idx = Vec::new();
+    for x in 0..g {
+        for &y in &bucket[count[x]..count[x + 1]] {
+            if seen[y] != x {
+                seen[y] = x;
+                row_idx.push(y);
+            }
+        }
+        col_ptr[x + 1] = row_idx.len();
+    }
+    let nnz = row_idx.len();
+    let quotient = SymbolicSparseColMat::new_unsorted_checked(g, g, col_ptr, None, row_idx);
+    let mut perm = vec![0usize; g];
+    let mut perm_inv = vec![0usize; g];
+    let mut mem = faer::dyn_stack::MemBuffer::try_new(
+        faer::sparse::linalg::amd::order_maybe_unsorted_scratch::<usize>(g, nnz),
+    )
+    .map_err(|e| LinalgError::Factor(format!("{e:?}")))?;
+    faer::sparse::linalg::amd::order_maybe_unsorted(
+        &mut perm,
+        &mut perm_inv,
+        quotient.as_ref(),
+        Default::default(),
+        faer::dyn_stack::MemStack::new(&mut mem),
+    )
+    .map_err(|e| LinalgError::Factor(format!("{e:?}")))?;
+    // Unknowns of each group, in increasing order.
+    let mut start = vec![0usize; g + 1];
+    for x in 0..g {
+        start[x + 1] = start[x] + size[x];
+    }
+    let mut members = vec![0usize; n];
+    let mut fill = start.clone();
+    for (i, &x) in groups.iter().enumerate() {
+        members[fill[x as usize]] = i;
+        fill[x as usize] += 1;
+    }
+    let mut fwd = Vec::with_capacity(n);
+    for &x in &perm {
+        fwd.extend_from_slice(&members[start[x]..start[x + 1]]);
+    }
+    let mut inv = vec![0usize; n];
+    for (k, &i) in fwd.iter().enumerate() {
+        inv[i] = k;
+    }
+    Ok((fwd, inv))
 }
 
 #[cfg(test)]
@@ -279,7 +464,7 @@ mod tests {
             (1, 2),
         ];
         let vals = [4.0, 1.0, 3.0, 1.0, 2.0, -1.0, 1.0, 1.0, 2.0];
-        let mut s = LdltSolver::new(3, &entries, vec![1, 1, -1]).unwrap();
+        let mut s = LdltSolver::new(3, &entries, vec![1, 1, -1], None).unwrap();
         let x = [0.5, -1.0, 2.0];
         for scale in [1.0, 3.0] {
             let v: Vec<f64> = vals.iter().map(|v| v * scale).collect();
@@ -294,5 +479,75 @@ mod tests {
                 assert!((scale * b[i] - x[i]).abs() < 1e-12, "{b:?}");
             }
         }
+    }
+
+    /// Grouped ordering, repeated entries summed, two right-hand sides at once: checked
+    /// against the LU solver on the same (symmetric) matrix.
+    #[test]
+    fn ldlt_grouped_ordering_and_two_rhs_match_lu() {
+        // A quasi-definite KKT on a path of m "vertices": H = tridiagonal SPD on 2m unknowns
+        // (two per vertex), and one constraint row per vertex coupling it with its neighbours.
+        let m = 30;
+        let n = 3 * m;
+        let mut entries = Vec::new();
+        let mut values = Vec::new();
+        let push = |e: &mut Vec<(usize, usize)>, v: &mut Vec<f64>, r, c, x: f64| {
+            e.push((r, c));
+            v.push(x);
+            if r != c {
+                e.push((c, r));
+                v.push(x);
+            }
+        };
+        for i in 0..2 * m {
+            // Diagonal given as two halves: repeated entries are summed.
+            push(&mut entries, &mut values, i, i, 2.0);
+            push(&mut entries, &mut values, i, i, 2.0);
+            if i + 2 < 2 * m {
+                push(&mut entries, &mut values, i + 2, i, -1.0);
+            }
+        }
+        for k in 0..m {
+            let row = 2 * m + k;
+            for j in k.saturating_sub(1)..(k + 2).min(m) {
+                let x = 0.3 + 0.1 * (j as f64) - 0.05 * (k as f64);
+                push(&mut entries, &mut values, row, 2 * j, x);
+                push(&mut entries, &mut values, row, 2 * j + 1, 1.0 - x);
+            }
+            push(&mut entries, &mut values, row, row, -1e-3);
+        }
+        let signs: Vec<i8> = (0..n).map(|i| if i < 2 * m { 1 } else { -1 }).collect();
+        // Groups: vertex k owns 2k, 2k+1 and 2m+k.
+        let groups: Vec<u32> = (0..n)
+            .map(|i| {
+                if i < 2 * m {
+                    (i / 2) as u32
+                } else {
+                    (i - 2 * m) as u32
+                }
+            })
+            .collect();
+        let mut ldlt = LdltSolver::new(n, &entries, signs, Some(&groups)).unwrap();
+        ldlt.factor(&values).unwrap();
+        let mut lu = LuSolver::new(n, &entries).unwrap();
+        lu.factor(&values).unwrap();
+        let mut rhs: Vec<f64> = (0..2 * n).map(|i| ((i * 7919) % 13) as f64 - 6.0).collect();
+        let mut a = rhs[..n].to_vec();
+        let mut b = rhs[n..].to_vec();
+        lu.solve_in_place(&mut a).unwrap();
+        lu.solve_in_place(&mut b).unwrap();
+        ldlt.solve_many_in_place(&mut rhs, 2).unwrap();
+        let scale = a.iter().chain(&b).fold(0.0f64, |m, x| m.max(x.abs()));
+        for i in 0..n {
+            assert!((rhs[i] - a[i]).abs() <= 1e-10 * scale, "{i}");
+            assert!((rhs[n + i] - b[i]).abs() <= 1e-10 * scale, "{i}");
+        }
+        // Bad calls are refused, not panics.
+        assert!(ldlt.solve_many_in_place(&mut rhs, 3).is_err());
+        assert!(ldlt.factor(&values[1..]).is_err());
+        assert!(LdltSolver::new(n, &[(n, 0)], vec![1; n], None).is_err());
+        let mut holes = groups.clone();
+        holes[0] = 10 * m as u32;
+        assert!(LdltSolver::new(n, &entries, vec![1; n], Some(&holes)).is_err());
     }
 }

@@ -17,6 +17,16 @@
 //!   triangle counts as infinite merit. When no trial decreases φ it falls back to τ. Since H is
 //!   the exact Jacobian of B_p and only λ·∇²θ is neglected, full steps are taken almost always
 //!   and ϖ_max falls quadratically near the end instead of by 0.75 per iteration.
+//! - Corrections. After a step (merit rule), up to four re-solves of Eq. 7 with the same
+//!   factorisation and right-hand side [0; h̄·(2π − θ)] at the new point, kept while each
+//!   halves ‖2π − θ‖₂ (a second-order correction: the fairing part of a step is tangent to
+//!   the constraints only to first order). A solve costs a fraction of a factorisation; on
+//!   gf_skirt_3D_0 iterations fell from 21 to 9, on the t-shirt from 37 to 33. Only normal
+//!   steps are added, so the fixed point is unchanged.
+//! - Ordering. The factorisation keeps x, y, z and λ of a vertex together and orders the
+//!   vertices by AMD on the mesh graph (`LdltSolver`'s groups): on ipc_skirt4K this ordering
+//!   costs 8 ms instead of 28 ms and its numeric factorisation ~10% less than AMD on all 4n
+//!   unknowns. A BFS-level-set nested dissection we tried gave 60% more fill.
 //! - Fairing weight (`until = "flattenable"` only). The tangential (fairing) part of the step
 //!   is halved whenever ϖ_max did not fall over an iteration. There the run stops at the first
 //!   flattenable iterate, so the fairing only shapes the path; on the t-shirt it otherwise kept
@@ -232,6 +242,8 @@ pub struct HistoryEntry {
     pub step_norm: f64,
     /// Step length taken (τ for the fixed rule).
     pub step_length: f64,
+    /// Feasibility corrections taken after the step with the same factorisation.
+    pub corrections: usize,
 }
 
 /// What a run found, besides the mesh.
@@ -472,8 +484,9 @@ struct System {
     trial_pos: Vec<[f64; 3]>,
     trial_theta: Vec<f64>,
     trial_grad: Vec<[f64; 3]>,
+    /// Right-hand sides, solved together: normal [0; h̄·B_λ] in 0..4n, tangential [B_p; 0]
+    /// in 4n..8n.
     rhs: Vec<f64>,
-    rhs_t: Vec<f64>,
     force: Vec<[f64; 3]>,
     stationarity: f64,
     /// Where the (2,2) block's diagonal starts in `values`.
@@ -482,6 +495,8 @@ struct System {
 
 const REGULARISATION: f64 = 1e-10;
 const MAX_REFINED_PER_ROUND: usize = 64;
+/// Most feasibility corrections per iteration (each one triangular solve with the same factor).
+const MAX_CORRECTIONS: usize = 4;
 const REGULARISATION_MAX: f64 = 1e2;
 const REGULARISATION_START: f64 = 1e-4;
 /// Most tangential (fairness) movement per iteration, in mean edge lengths.
@@ -566,8 +581,10 @@ impl System {
             LinearSolver::Lu => Factor::Lu(Box::new(LuSolver::new(4 * n, &entries).map_err(kkt)?)),
             LinearSolver::Ldlt => {
                 let signs = (0..4 * n).map(|i| if i < 3 * n { 1 } else { -1 }).collect();
+                // x, y, z and λ of a vertex share their couplings: order them as one.
+                let groups: Vec<u32> = (0..4 * n).map(|i| (i % n) as u32).collect();
                 Factor::Ldlt(Box::new(
-                    LdltSolver::new(4 * n, &entries, signs).map_err(kkt)?,
+                    LdltSolver::new(4 * n, &entries, signs, Some(&groups)).map_err(kkt)?,
                 ))
             }
         };
@@ -589,8 +606,7 @@ impl System {
             trial_pos: mesh.positions().to_vec(),
             trial_theta: vec![0.0; n],
             trial_grad: vec![[0.0; 3]; ns],
-            rhs: vec![0.0; 4 * n],
-            rhs_t: vec![0.0; 4 * n],
+            rhs: vec![0.0; 8 * n],
             force: vec![[0.0; 3]; n],
             stationarity: 0.0,
             reg_start,
@@ -718,10 +734,10 @@ impl System {
                 let b = b_p(&self.pos, anchors, conn.ring_of(v), v, params);
                 for c in 0..3 {
                     self.rhs[c * n + r] = 0.0;
-                    self.rhs_t[c * n + r] = b[c];
+                    self.rhs[4 * n + c * n + r] = b[c];
                 }
                 self.rhs[3 * n + r] = h * (TAU - self.theta[r]);
-                self.rhs_t[3 * n + r] = 0.0;
+                self.rhs[7 * n + r] = 0.0;
             }
             for v in &mut self.values[self.reg_start..] {
                 *v = -reg;
@@ -729,8 +745,7 @@ impl System {
             let solved = self
                 .lu
                 .factor(&self.values)
-                .and_then(|_| self.lu.solve_in_place(&mut self.rhs))
-                .and_then(|_| self.lu.solve_in_place(&mut self.rhs_t));
+                .and_then(|_| self.lu.solve_two_in_place(&mut self.rhs));
             if let Err(e) = solved {
                 report.stop_reason = format!("linear solve failed: {e}");
                 return Ok(End::Stalled(self.stuck(&high_streak, params)));
@@ -739,11 +754,12 @@ impl System {
             let mut tan_norm = 0.0f64;
             for r in 0..n {
                 dn[r] = [self.rhs[r], self.rhs[n + r], self.rhs[2 * n + r]];
-                dt[r] = [self.rhs_t[r], self.rhs_t[n + r], self.rhs_t[2 * n + r]];
+                let t = &self.rhs[4 * n..];
+                dt[r] = [t[r], t[n + r], t[2 * n + r]];
                 let d = [0, 1, 2].map(|c| dn[r][c] + dt[r][c]);
                 step_norm = step_norm.max(dot(d, d).sqrt());
                 tan_norm = tan_norm.max(dot(dt[r], dt[r]).sqrt());
-                lambda[r] = h * self.rhs_t[3 * n + r];
+                lambda[r] = h * t[3 * n + r];
             }
             step_norm /= h;
             tan_norm /= h;
@@ -855,6 +871,11 @@ impl System {
             std::mem::swap(&mut self.pos, &mut self.trial_pos);
             std::mem::swap(&mut self.theta, &mut self.trial_theta);
             std::mem::swap(&mut self.grad, &mut self.trial_grad);
+            let corrections = if params.step_rule == StepRule::Merit {
+                self.correct(tris, conn, params)
+            } else {
+                0
+            };
             report.iterations += 1;
             last_step = Some(step_norm);
             report.history.push(HistoryEntry {
@@ -862,6 +883,7 @@ impl System {
                 max_flattenability: wmax,
                 step_norm,
                 step_length: alpha,
+                corrections,
             });
             control.progress(&Progress {
                 stage: "newton".into(),
@@ -870,6 +892,72 @@ impl System {
                 step_norm: Some(step_norm),
             });
         }
+    }
+
+    /// Feasibility corrections with the factorisation already computed (a chord / second-order
+    /// correction step): solve Eq. 7 for [0; h̄·(2π − θ)] at the new point with the old Λ and
+    /// move by the result, while the violation ‖2π − θ‖₂ at least halves. The tangential
+    /// (fairing) part of a step leaves a violation of second order in its length; these
+    /// solves remove it for the cost of a triangular solve each instead of a factorisation.
+    /// Returns how many were taken. Only normal steps are added, so the stationary point is
+    /// unchanged.
+    fn correct(
+        &mut self,
+        tris: &[[u32; 3]],
+        conn: &crate::mesh::Connectivity,
+        params: &Params,
+    ) -> usize {
+        let n = self.n;
+        let h = self.h;
+        let mut taken = 0;
+        let violation = |theta: &[f64]| theta.iter().map(|t| (TAU - t) * (TAU - t)).sum::<f64>();
+        let mut c0 = violation(&self.theta);
+        while taken < MAX_CORRECTIONS {
+            let wmax = self
+                .theta
+                .iter()
+                .map(|t| (TAU - t).abs())
+                .fold(0.0, f64::max);
+            if wmax <= 0.5 * params.tolerance {
+                break;
+            }
+            for r in 0..n {
+                for c in 0..3 {
+                    self.rhs[c * n + r] = 0.0;
+                }
+                self.rhs[3 * n + r] = h * (TAU - self.theta[r]);
+            }
+            if self.lu.solve_in_place(&mut self.rhs[..4 * n]).is_err() {
+                break;
+            }
+            self.trial_pos.copy_from_slice(&self.pos);
+            for (r, &v) in self.free.iter().enumerate() {
+                let p = &mut self.trial_pos[v as usize];
+                for c in 0..3 {
+                    p[c] += self.rhs[c * n + r];
+                }
+            }
+            eval(
+                &self.trial_pos,
+                tris,
+                conn,
+                &self.free,
+                &self.slot_start,
+                &mut self.trial_theta,
+                &mut self.trial_grad,
+            );
+            let c1 = violation(&self.trial_theta);
+            // Halving in ℓ2 (so ¼ of the squared sum); never into a degenerate or flipped state.
+            if c1.is_nan() || c1 > 0.25 * c0 || !self.trial_valid(tris) {
+                break;
+            }
+            std::mem::swap(&mut self.pos, &mut self.trial_pos);
+            std::mem::swap(&mut self.theta, &mut self.trial_theta);
+            std::mem::swap(&mut self.grad, &mut self.trial_grad);
+            c0 = c1;
+            taken += 1;
+        }
+        taken
     }
 
     /// Vertices whose ϖ stayed high through the stall window, worst first; else the worst one.
@@ -1011,6 +1099,16 @@ impl Factor {
         match self {
             Factor::Lu(s) => s.solve_in_place(rhs),
             Factor::Ldlt(s) => s.solve_in_place(rhs),
+        }
+    }
+    /// Two right-hand sides stored one after the other.
+    fn solve_two_in_place(&mut self, rhs: &mut [f64]) -> Result<(), LinalgError> {
+        match self {
+            Factor::Lu(s) => {
+                let (a, b) = rhs.split_at_mut(rhs.len() / 2);
+                s.solve_in_place(a).and_then(|_| s.solve_in_place(b))
+            }
+            Factor::Ldlt(s) => s.solve_many_in_place(rhs, 2),
         }
     }
 }
