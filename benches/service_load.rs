@@ -1,9 +1,12 @@
 //! Load benchmark of `flatmesh serve` on loopback (not a test): every worker is kept busy by
 //! slow `flatten` jobs while many concurrent clients poll job status and submit small jobs.
 //! Prints p50/p99/max latencies and throughput. Target: status polls under 5 ms p99 while the
-//! workers are saturated.
+//! workers are saturated. In the paced phase each client sends one request every INTERVAL_MS
+//! (20), the clients' phases spread evenly over that interval; the closed-loop phase sends
+//! the next request as soon as the last one is answered.
 //!
-//! Run: `cargo bench --bench service_load` (env CLIENTS, SECONDS to change the load).
+//! Run: `cargo bench --bench service_load` (env CLIENTS, SECONDS, INTERVAL_MS to change the
+//! load; BUSY=0 for a control run with idle workers).
 
 use serde_json::{json, Value};
 use std::io::{BufRead, BufReader};
@@ -100,9 +103,24 @@ fn main() {
         let slow = up(saddle_obj(250)).await;
         let small = up(std::fs::read("fixtures/cylinder.obj").unwrap()).await;
         let workers = std::thread::available_parallelism().map_or(1, |n| n.get());
-        // Enough slow jobs to keep every worker busy for the whole run.
+        // Enough slow jobs to keep every worker busy for the whole run (BUSY=0: none, a
+        // control run with idle workers that polls a finished small job instead).
+        let busy = env("BUSY", 1) != 0;
         let mut slow_ids = vec![];
-        for _ in 0..(workers * (seconds / 3 + 2)) {
+        let n_slow = if busy { workers * (seconds / 3 + 2) } else { 0 };
+        if !busy {
+            let v: Value = c
+                .post(format!("{base}/v1/jobs"))
+                .json(&json!({"kind": "report", "mesh_id": small}))
+                .send()
+                .await
+                .unwrap()
+                .json()
+                .await
+                .unwrap();
+            slow_ids = vec![v["id"].as_str().unwrap().to_string(); workers];
+        }
+        for _ in 0..n_slow {
             let v: Value = c
                 .post(format!("{base}/v1/jobs"))
                 .json(&json!({"kind": "flatten", "mesh_id": slow,
@@ -125,16 +143,21 @@ fn main() {
                 .json()
                 .await
                 .unwrap();
-            if v["running"].as_u64() == Some(workers as u64) {
+            if !busy || v["running"].as_u64() == Some(workers as u64) {
                 break;
             }
             tokio::time::sleep(Duration::from_millis(20)).await;
         }
         for (label, interval_ms) in [("paced", env("INTERVAL_MS", 20)), ("closed-loop", 0)] {
+            let label = if busy {
+                format!("{label}, {workers} workers busy with slow jobs")
+            } else {
+                format!("{label}, control: no slow jobs")
+            };
             phase(
                 &c,
                 &base,
-                label,
+                &label,
                 clients,
                 seconds,
                 interval_ms,
@@ -175,6 +198,12 @@ async fn phase(
         tasks.push(tokio::spawn(async move {
             let (mut polls, mut submits, mut errors) = (vec![], vec![], 0usize);
             let mut i = 0usize;
+            // Independent clients are not phase-locked: spread their first requests over one
+            // interval (all 32 at the same instant would measure a burst's queue instead).
+            if interval_ms > 0 {
+                let offset = Duration::from_micros((interval_ms * 1000 * k / clients) as u64);
+                tokio::time::sleep(offset).await;
+            }
             let mut tick = (interval_ms > 0).then(|| {
                 let mut t = tokio::time::interval(Duration::from_millis(interval_ms as u64));
                 t.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
@@ -232,8 +261,12 @@ async fn phase(
         .unwrap();
     let total = polls.len() + submits.len();
     println!(
-        "service_load [{label}{}]: {clients} clients, {elapsed:.1} s, {workers} workers busy (running at end: {})",
-        if interval_ms > 0 { format!(", one request per client every {interval_ms} ms") } else { String::new() },
+        "service_load [{label}{}]: {clients} clients, {elapsed:.1} s, jobs running at end: {}",
+        if interval_ms > 0 {
+            format!(", one request per client every {interval_ms} ms")
+        } else {
+            String::new()
+        },
         v["running"]
     );
     println!(
