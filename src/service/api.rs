@@ -583,12 +583,20 @@ pub async fn submit_job(
     Ok(res)
 }
 
+/// A job by id. Status polls are the hot path: when the store can answer at once (a free
+/// SQLite reader: a primary-key read in WAL mode never waits for the writer) it is asked on
+/// this thread, since the hand-off to a blocking thread costs more than the read (status poll
+/// p99 with both workers busy 4.8 -> 3.3-4.1 ms in `benches/service_load.rs`).
 async fn get_job_rec(st: &AppState, id: &str) -> Result<JobRecord, Problem> {
-    let store = st.store.clone();
-    let id2 = id.to_string();
-    blocking(move || Ok(store.get_job(&id2)?))
-        .await?
-        .ok_or_else(|| Problem::not_found("job", id))
+    let found = match st.store.try_get_job_now(id) {
+        Some(r) => r?,
+        None => {
+            let store = st.store.clone();
+            let id2 = id.to_string();
+            blocking(move || Ok(store.get_job(&id2)?)).await?
+        }
+    };
+    found.ok_or_else(|| Problem::not_found("job", id))
 }
 
 fn live_progress(st: &AppState, j: &JobRecord) -> Option<Value> {

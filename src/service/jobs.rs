@@ -661,4 +661,30 @@ mod tests {
         assert_eq!(exec.queued(), 0);
         let _ = std::fs::remove_dir_all(&dir);
     }
+
+    /// The non-blocking read agrees with `get_job`, and declines (None) rather than waits
+    /// when every reader is held.
+    #[test]
+    fn try_get_job_now_matches_get_job_and_never_waits() {
+        let dir = std::env::temp_dir().join(format!("flatmesh-trynow-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let store = SqliteStore::open(&dir).unwrap();
+        store.insert_job(&job("j1", "m1", false)).unwrap();
+        let mut j = store.get_job("j1").unwrap().unwrap();
+        j.status = Status::Running;
+        j.progress = Some(serde_json::json!({"stage": "newton", "iteration": 3}));
+        store.update_job(&j).unwrap();
+        let now = store
+            .try_get_job_now("j1")
+            .expect("a reader is free")
+            .unwrap();
+        assert_eq!(now, store.get_job("j1").unwrap());
+        assert_eq!(now.unwrap().status, Status::Running);
+        assert_eq!(store.try_get_job_now("nope").unwrap().unwrap(), None);
+        let held = store.hold_readers_for_test();
+        assert!(store.try_get_job_now("j1").is_none());
+        drop(held);
+        assert!(store.try_get_job_now("j1").is_some());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

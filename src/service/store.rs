@@ -166,6 +166,12 @@ pub trait Store: Send + Sync {
     fn find_idempotent(&self, key: &str) -> Result<Option<JobRecord>, StoreError>;
     /// A job by id.
     fn get_job(&self, id: &str) -> Result<Option<JobRecord>, StoreError>;
+    /// `get_job` when it can be answered without waiting (no lock to wait for, no network):
+    /// None means "ask `get_job` from a blocking thread". Lets the async status poll skip a
+    /// thread hand-off.
+    fn try_get_job_now(&self, _id: &str) -> Option<Result<Option<JobRecord>, StoreError>> {
+        None
+    }
     /// Overwrite a job's mutable fields.
     fn update_job(&self, j: &JobRecord) -> Result<(), StoreError>;
     /// Delete a job row; false when absent.
@@ -339,6 +345,12 @@ impl SqliteStore {
         self.readers[i].lock().unwrap_or_else(|e| e.into_inner())
     }
 
+    /// Every read connection, locked (tests of what happens when none is free).
+    #[cfg(test)]
+    pub(crate) fn hold_readers_for_test(&self) -> Vec<std::sync::MutexGuard<'_, Connection>> {
+        self.readers.iter().map(|r| r.lock().unwrap()).collect()
+    }
+
     fn blob_path(&self, key: &str) -> PathBuf {
         // Keys are built by the service from generated ids; refuse anything that could escape.
         let clean: String = key
@@ -482,6 +494,16 @@ impl Store for SqliteStore {
 
     fn get_job(&self, id: &str) -> Result<Option<JobRecord>, StoreError> {
         Ok(self.select_jobs("id = ?1", &[&id], "")?.pop())
+    }
+
+    fn try_get_job_now(&self, id: &str) -> Option<Result<Option<JobRecord>, StoreError>> {
+        // Only with a reader nobody holds: a WAL read never waits for the writer.
+        let c = self.readers.iter().find_map(|r| r.try_lock().ok())?;
+        let read = || -> Result<Option<JobRecord>, StoreError> {
+            let mut st = c.prepare_cached(&format!("SELECT {JOB_COLS} FROM jobs WHERE id = ?1"))?;
+            Ok(st.query_row([id], job_from_row).optional()?)
+        };
+        Some(read())
     }
 
     fn update_job(&self, j: &JobRecord) -> Result<(), StoreError> {
