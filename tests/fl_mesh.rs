@@ -390,3 +390,42 @@ fn closest_anchor_converges() {
     assert_eq!(out.summary["converged"], serde_json::json!(true));
     assert!(max_varpi(&out.mesh.unwrap()) <= 1e-6);
 }
+
+/// A curved developable input (the ruled cylinder) with `until = stationary`: it moves by the
+/// fairing it asks for and stays flattenable (ϖ measured on the output), boundary fixed. The
+/// fairing of a cylinder strip along its rulings keeps it on a developable surface, so the
+/// run must end at the paper's stationary point (converged) without refinement.
+#[test]
+fn curved_developable_input_stays_flattenable_when_faired() {
+    let m = load_fixture("cylinder");
+    assert!(max_varpi(&m) <= 1e-6);
+    let p = Params {
+        until: Until::Stationary,
+        ..Params::default()
+    };
+    let out = fl_mesh::run(&m, &p, &Silent::default()).unwrap();
+    assert_eq!(out.summary["converged"], serde_json::json!(true));
+    assert_eq!(out.summary["stop_reason"], serde_json::json!("stationary"));
+    assert!(out.summary["refined"].as_array().unwrap().is_empty());
+    let o = out.mesh.unwrap();
+    assert_eq!(o.num_vertices(), m.num_vertices());
+    assert!(max_varpi(&o) <= 1e-6, "{}", max_varpi(&o));
+    let kinds = m.conn().kinds();
+    for v in 0..m.num_vertices() {
+        if kinds[v] != VertexKind::Interior {
+            assert_eq!(o.positions()[v], m.positions()[v]);
+        }
+    }
+    // A second stationary run from the output barely moves: it is the fixed point.
+    let again = fl_mesh::run(&o, &p, &Silent::default()).unwrap();
+    let o2 = again.mesh.unwrap();
+    let moved = o
+        .positions()
+        .iter()
+        .zip(o2.positions())
+        .map(|(a, b)| (0..3).map(|c| (a[c] - b[c]).abs()).fold(0.0, f64::max))
+        .fold(0.0, f64::max);
+    let (lo, hi) = m.bbox();
+    let diag = (0..3).map(|c| (hi[c] - lo[c]).powi(2)).sum::<f64>().sqrt();
+    assert!(moved <= 1e-4 * diag, "moved {moved} of {diag}");
+}
