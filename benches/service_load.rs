@@ -32,6 +32,12 @@ fn saddle_obj(n: usize) -> Vec<u8> {
     s.into_bytes()
 }
 
+/// Send a request that creates something; its `id`.
+async fn post_for_id(req: reqwest::RequestBuilder) -> String {
+    let v: Value = req.send().await.unwrap().json().await.unwrap();
+    v["id"].as_str().unwrap().to_string()
+}
+
 fn pct(v: &mut [f64], p: f64) -> f64 {
     if v.is_empty() {
         return f64::NAN;
@@ -84,21 +90,11 @@ fn main() {
     rt.block_on(async move {
         let c = reqwest::Client::new();
         let up = |bytes: Vec<u8>| {
-            let c = c.clone();
-            let base = base.clone();
-            async move {
-                let v: Value = c
-                    .post(format!("{base}/v1/meshes"))
+            post_for_id(
+                c.post(format!("{base}/v1/meshes"))
                     .header("content-type", "model/obj")
-                    .body(bytes)
-                    .send()
-                    .await
-                    .unwrap()
-                    .json()
-                    .await
-                    .unwrap();
-                v["id"].as_str().unwrap().to_string()
-            }
+                    .body(bytes),
+            )
         };
         let slow = up(saddle_obj(250)).await;
         let small = up(std::fs::read("fixtures/cylinder.obj").unwrap()).await;
@@ -108,30 +104,17 @@ fn main() {
         let busy = env("BUSY", 1) != 0;
         let mut slow_ids = vec![];
         let n_slow = if busy { workers * (seconds / 3 + 2) } else { 0 };
+        let submit = |body: Value| post_for_id(c.post(format!("{base}/v1/jobs")).json(&body));
         if !busy {
-            let v: Value = c
-                .post(format!("{base}/v1/jobs"))
-                .json(&json!({"kind": "report", "mesh_id": small}))
-                .send()
-                .await
-                .unwrap()
-                .json()
-                .await
-                .unwrap();
-            slow_ids = vec![v["id"].as_str().unwrap().to_string(); workers];
+            let id = submit(json!({"kind": "report", "mesh_id": small})).await;
+            slow_ids = vec![id; workers];
         }
         for _ in 0..n_slow {
-            let v: Value = c
-                .post(format!("{base}/v1/jobs"))
-                .json(&json!({"kind": "flatten", "mesh_id": slow,
+            slow_ids.push(
+                submit(json!({"kind": "flatten", "mesh_id": slow,
                     "params": {"tolerance": 1e-300, "max_iterations": 100000}}))
-                .send()
-                .await
-                .unwrap()
-                .json()
-                .await
-                .unwrap();
-            slow_ids.push(v["id"].as_str().unwrap().to_string());
+                .await,
+            );
         }
         // wait until the workers are busy
         loop {

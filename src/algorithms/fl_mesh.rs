@@ -488,6 +488,8 @@ struct System {
     /// in 4n..8n.
     rhs: Vec<f64>,
     force: Vec<[f64; 3]>,
+    /// Step of a feasibility correction.
+    correction: Vec<[f64; 3]>,
     stationarity: f64,
     /// Where the (2,2) block's diagonal starts in `values`.
     reg_start: usize,
@@ -608,6 +610,7 @@ impl System {
             trial_grad: vec![[0.0; 3]; ns],
             rhs: vec![0.0; 8 * n],
             force: vec![[0.0; 3]; n],
+            correction: vec![[0.0; 3]; n],
             stationarity: 0.0,
             reg_start,
         })
@@ -930,25 +933,15 @@ impl System {
             if self.lu.solve_in_place(&mut self.rhs[..4 * n]).is_err() {
                 break;
             }
-            self.trial_pos.copy_from_slice(&self.pos);
-            for (r, &v) in self.free.iter().enumerate() {
-                let p = &mut self.trial_pos[v as usize];
-                for c in 0..3 {
-                    p[c] += self.rhs[c * n + r];
-                }
+            let mut step = std::mem::take(&mut self.correction);
+            for r in 0..n {
+                step[r] = [0, 1, 2].map(|c| self.rhs[c * n + r]);
             }
-            eval(
-                &self.trial_pos,
-                tris,
-                conn,
-                &self.free,
-                &self.slot_start,
-                &mut self.trial_theta,
-                &mut self.trial_grad,
-            );
+            let valid = self.try_step(tris, conn, &step, 1.0);
+            self.correction = step;
             let c1 = violation(&self.trial_theta);
             // Halving in ℓ2 (so ¼ of the squared sum); never into a degenerate or flipped state.
-            if c1.is_nan() || c1 > 0.25 * c0 || !self.trial_valid(tris) {
+            if !valid || c1.is_nan() || c1 > 0.25 * c0 {
                 break;
             }
             std::mem::swap(&mut self.pos, &mut self.trial_pos);
