@@ -429,3 +429,54 @@ fn curved_developable_input_stays_flattenable_when_faired() {
     let diag = (0..3).map(|c| (hi[c] - lo[c]).powi(2)).sum::<f64>().sqrt();
     assert!(moved <= 1e-4 * diag, "moved {moved} of {diag}");
 }
+
+/// The cube cut open along three edges of its top: four interior corners with θ = 3π/2 and
+/// every boundary vertex fixed. The default run stalls, refines around the corners, and
+/// whatever it ends with must be told truthfully: `converged` agrees with ϖ measured on the
+/// output, every stuck vertex really is above the tolerance, every refined vertex exists,
+/// the run ends within the iteration budget, and nothing is NaN.
+#[test]
+fn obstructed_input_ends_truthfully() {
+    let m = load_fixture("cube_cuts");
+    let p = Params::default();
+    let out = fl_mesh::run(&m, &p, &Silent::default()).unwrap();
+    let o = out.mesh.unwrap();
+    assert!(o.positions().iter().flatten().all(|x| x.is_finite()));
+    let s = &out.summary;
+    let w = max_varpi(&o);
+    assert_eq!(
+        s["converged"].as_bool().unwrap(),
+        w <= p.tolerance,
+        "ϖ_max {w:e}"
+    );
+    assert!((s["max_flattenability"].as_f64().unwrap() - w).abs() <= 1e-12);
+    let theta = geometry::angle_sums(&o);
+    let varpi = geometry::flattenability(&o, &theta);
+    let stuck: Vec<usize> = s["stuck_vertices"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_u64().unwrap() as usize)
+        .collect();
+    let above: Vec<usize> = (0..varpi.len())
+        .filter(|&v| varpi[v] > p.tolerance)
+        .collect();
+    let mut sorted = stuck.clone();
+    sorted.sort_unstable();
+    assert_eq!(
+        sorted, above,
+        "stuck vertices are exactly those above the tolerance"
+    );
+    for r in s["refined"].as_array().unwrap() {
+        assert!((r.as_u64().unwrap() as usize) < o.num_vertices());
+    }
+    assert!(s["iterations"].as_u64().unwrap() as usize <= p.max_iterations);
+    assert!(!s["stop_reason"].as_str().unwrap().is_empty());
+    // Refinement only appends: the input's vertices keep their numbers and the boundary.
+    let kinds = m.conn().kinds();
+    for v in 0..m.num_vertices() {
+        if kinds[v] != VertexKind::Interior {
+            assert_eq!(o.positions()[v], m.positions()[v]);
+        }
+    }
+}
