@@ -806,12 +806,7 @@ impl System {
                         (0.015625, 0.0),
                     ];
                     let mut best = (f64::INFINITY, (params.tau, params.tau * s));
-                    let c2_0 = self
-                        .theta
-                        .iter()
-                        .map(|t| (TAU - t) * (TAU - t))
-                        .sum::<f64>()
-                        .sqrt();
+                    let c2_0 = violation(&self.theta).1;
                     let mut accepted = None;
                     for &(an, at) in &TRIALS {
                         for r in 0..n {
@@ -819,14 +814,10 @@ impl System {
                         }
                         let ok = self.try_step(tris, conn, &delta, 1.0);
                         let (w, c2) = if ok {
-                            self.trial_theta.iter().fold((0.0f64, 0.0f64), |(m, q), t| {
-                                let d = (TAU - t).abs();
-                                (m.max(d), q + d * d)
-                            })
+                            violation(&self.trial_theta)
                         } else {
                             (f64::INFINITY, f64::INFINITY)
                         };
-                        let c2 = c2.sqrt();
                         if c2 <= (1.0 - 1e-4 * an) * c2_0 || w <= budget {
                             accepted = Some(an);
                             break;
@@ -913,14 +904,8 @@ impl System {
         let n = self.n;
         let h = self.h;
         let mut taken = 0;
-        let violation = |theta: &[f64]| theta.iter().map(|t| (TAU - t) * (TAU - t)).sum::<f64>();
-        let mut c0 = violation(&self.theta);
+        let (mut wmax, mut c0) = violation(&self.theta);
         while taken < MAX_CORRECTIONS {
-            let wmax = self
-                .theta
-                .iter()
-                .map(|t| (TAU - t).abs())
-                .fold(0.0, f64::max);
             if wmax <= 0.5 * params.tolerance {
                 break;
             }
@@ -939,15 +924,15 @@ impl System {
             }
             let valid = self.try_step(tris, conn, &step, 1.0);
             self.correction = step;
-            let c1 = violation(&self.trial_theta);
-            // Halving in ℓ2 (so ¼ of the squared sum); never into a degenerate or flipped state.
-            if !valid || c1.is_nan() || c1 > 0.25 * c0 {
+            let (w1, c1) = violation(&self.trial_theta);
+            // Halving in ℓ2; never into a degenerate or flipped state.
+            if !valid || c1.is_nan() || c1 > 0.5 * c0 {
                 break;
             }
             std::mem::swap(&mut self.pos, &mut self.trial_pos);
             std::mem::swap(&mut self.theta, &mut self.trial_theta);
             std::mem::swap(&mut self.grad, &mut self.trial_grad);
-            c0 = c1;
+            (wmax, c0) = (w1, c1);
             taken += 1;
         }
         taken
@@ -1104,6 +1089,15 @@ impl Factor {
             Factor::Ldlt(s) => s.solve_many_in_place(rhs, 2),
         }
     }
+}
+
+/// Constraint violation 2π − θ (Eq. 9's B_λ): (max, ℓ2 norm).
+fn violation(theta: &[f64]) -> (f64, f64) {
+    let (m, q) = theta.iter().fold((0.0f64, 0.0f64), |(m, q), t| {
+        let d = (TAU - t).abs();
+        (m.max(d), q + d * d)
+    });
+    (m, q.sqrt())
 }
 
 /// B_p of Eq. 8 at vertex v.

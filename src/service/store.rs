@@ -382,6 +382,12 @@ impl SqliteStore {
     }
 }
 
+/// One job by its primary key.
+fn job_by_id(c: &Connection, id: &str) -> Result<Option<JobRecord>, StoreError> {
+    let mut st = c.prepare_cached(&format!("SELECT {JOB_COLS} FROM jobs WHERE id = ?1"))?;
+    Ok(st.query_row([id], job_from_row).optional()?)
+}
+
 impl Store for SqliteStore {
     fn ping(&self) -> Result<(), StoreError> {
         self.conn().query_row("SELECT 1", [], |_| Ok(()))?;
@@ -493,17 +499,13 @@ impl Store for SqliteStore {
     }
 
     fn get_job(&self, id: &str) -> Result<Option<JobRecord>, StoreError> {
-        Ok(self.select_jobs("id = ?1", &[&id], "")?.pop())
+        job_by_id(&self.reader(), id)
     }
 
     fn try_get_job_now(&self, id: &str) -> Option<Result<Option<JobRecord>, StoreError>> {
         // Only with a reader nobody holds: a WAL read never waits for the writer.
         let c = self.readers.iter().find_map(|r| r.try_lock().ok())?;
-        let read = || -> Result<Option<JobRecord>, StoreError> {
-            let mut st = c.prepare_cached(&format!("SELECT {JOB_COLS} FROM jobs WHERE id = ?1"))?;
-            Ok(st.query_row([id], job_from_row).optional()?)
-        };
-        Some(read())
+        Some(job_by_id(&c, id))
     }
 
     fn update_job(&self, j: &JobRecord) -> Result<(), StoreError> {
