@@ -119,13 +119,13 @@ fn single_patch(name: &str, positions: Vec<[f64; 3]>, triangles: Vec<[u32; 3]>) 
 }
 
 /// Positions, triangles, and the grid cell (i, j) of each triangle.
-type Grid = (Vec<[f64; 3]>, Vec<[u32; 3]>, Vec<(usize, usize)>);
+pub(crate) type Grid = (Vec<[f64; 3]>, Vec<[u32; 3]>, Vec<(usize, usize)>);
 
 /// A grid of (nu + 1) × (nv + 1) vertices through `f(i, j)` with two triangles per cell,
 /// counter-clockwise when ∂f/∂i × ∂f/∂j points to the front. Diagonals alternate like a
 /// checkerboard so that valences vary. With `wrap_u` column nu is column 0 (a closed band).
 /// Cells with `keep(i, j) == false` are left out and vertices no cell uses are dropped.
-fn grid(
+pub(crate) fn grid(
     nu: usize,
     nv: usize,
     wrap_u: bool,
@@ -217,10 +217,10 @@ fn ring_disk(rings: usize, f: impl Fn(usize, f64) -> [f64; 3]) -> (Vec<[f64; 3]>
 }
 
 /// splitmix64: tiny, fixed, reproducible on every platform.
-struct SplitMix(u64);
+pub(crate) struct SplitMix(pub(crate) u64);
 
 impl SplitMix {
-    fn next_u64(&mut self) -> u64 {
+    pub(crate) fn next_u64(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = self.0;
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
@@ -228,11 +228,11 @@ impl SplitMix {
         z ^ (z >> 31)
     }
     /// Uniform in (0, 1].
-    fn unit(&mut self) -> f64 {
+    pub(crate) fn unit(&mut self) -> f64 {
         ((self.next_u64() >> 11) + 1) as f64 / (1u64 << 53) as f64
     }
     /// Standard normal (Box–Muller).
-    fn normal(&mut self) -> f64 {
+    pub(crate) fn normal(&mut self) -> f64 {
         let (u, v) = (self.unit(), self.unit());
         (-2.0 * u.ln()).sqrt() * (TAU * v).cos()
     }

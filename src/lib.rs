@@ -6,6 +6,7 @@
 #![warn(missing_docs)]
 
 pub mod algorithms;
+pub mod corpus;
 pub mod fixtures;
 pub mod geometry;
 pub mod io;

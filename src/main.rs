@@ -37,16 +37,20 @@ enum Command {
     /// DIR receives report.json (the flattenability report of the output mesh plus the job's
     /// own figures), mesh.glb and mesh.obj; `flatten` also writes patterns.json,
     /// patterns.svg and patterns.dxf. Progress goes to stderr. Exit status: 0 on success, 2
-    /// for invalid input or parameters, 1 on other failures.
+    /// for invalid input or parameters, 3 when an optimiser (fl-mesh, subdivide) ran and wrote
+    /// its best result but did not converge (one line on stderr gives the ϖ_max reached, why it
+    /// stopped and the stuck vertices), 1 on other failures.
     ///
     /// flatten parameters: method=lpfb|lscm (lpfb), unit=mm|cm|m|in (drawing unit, mm),
     /// input_unit=mm|cm|m|in (the mesh's unit, m), max_iterations (200), tolerance (1e-5),
     /// svg_triangles=true|false (false).
     ///
-    /// fl-mesh parameters: w1 (1), w2 (0.1), tau (0.25), step_rule=merit|fixed (merit),
+    /// fl-mesh parameters: w1 (1), w2 (0.1), tau (0.25), step_rule=merit|fixed|lm (merit),
     /// anchor=input|closest (input), until=flattenable|stationary (flattenable), tolerance
     /// (1e-6 rad), step_tolerance (1e-5), max_iterations (200), refine=true|false (true),
-    /// max_refinements (3), stall_iterations (16), linear_solver=ldlt|lu (ldlt).
+    /// max_refinements (3), stall_iterations (16), linear_solver=ldlt|lu (ldlt),
+    /// shape_guard=true|false (false), min_angle (2 degrees). The best iterate is written
+    /// (never worse than the input in ϖ_max); when it is not flattenable the exit status is 3.
     ///
     /// subdivide (Sec. 3 of Wang's FL meshes) also writes level_<k>.glb and level_<k>.obj for
     /// every level; parameters: levels (1; or --levels), curves (or --curves), split_ratio
@@ -285,7 +289,47 @@ fn run(
         }
         println!("{}", path.display());
     }
+    if outcome.summary.get("converged") == Some(&serde_json::Value::Bool(false)) {
+        eprintln!("flatmesh: {}", not_converged_line(kind, &outcome.summary));
+        return ExitCode::from(NOT_CONVERGED);
+    }
     ExitCode::SUCCESS
+}
+
+/// Exit status of `run` when the job ran and wrote its results but did not converge.
+const NOT_CONVERGED: u8 = 3;
+
+/// One line for stderr: the ϖ_max reached, why the run ended and the stuck vertices.
+fn not_converged_line(kind: &str, summary: &serde_json::Map<String, serde_json::Value>) -> String {
+    let stuck: Vec<String> = summary
+        .get("stuck_vertices")
+        .and_then(|s| s.as_array())
+        .map(|a| a.iter().map(|v| v.to_string()).collect())
+        .unwrap_or_default();
+    let shown = stuck
+        .iter()
+        .take(10)
+        .cloned()
+        .collect::<Vec<_>>()
+        .join(", ");
+    format!(
+        "{kind} did not converge: ϖ_max {} rad reached ({}); {} stuck vertices{}{}",
+        summary
+            .get("max_flattenability")
+            .and_then(|v| v.as_f64())
+            .map_or("?".into(), |w| format!("{w:.3e}")),
+        summary
+            .get("stop_reason")
+            .and_then(|v| v.as_str())
+            .unwrap_or("unknown"),
+        stuck.len(),
+        if stuck.is_empty() { "" } else { ": " },
+        if stuck.len() > 10 {
+            format!("{shown}, …")
+        } else {
+            shown
+        }
+    )
 }
 
 /// `--levels` and `--curves` (subdivide only) folded into the parameters.

@@ -178,3 +178,44 @@ fn run_fl_mesh_refuses_unknown_keys_and_bad_values_by_name() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// An unconverged run still writes its best result, exits with status 3 and says on one
+/// stderr line how far it got and which vertices are stuck; the files agree with that line.
+#[test]
+fn unconverged_run_exits_3_and_says_why() {
+    let dir = tmp("unconverged");
+    let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/cube_cuts.obj");
+    let out = bin()
+        .args(["run", "fl-mesh"])
+        .arg(&fixture)
+        .arg("--out")
+        .arg(&dir)
+        .args(["--set", "max_iterations=5", "--set", "refine=false"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(3), "{out:?}");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let line = stderr
+        .lines()
+        .find(|l| l.contains("did not converge"))
+        .expect("one line says it did not converge");
+    let input = flatmesh::io::load_path(&fixture).unwrap().0;
+    let output = flatmesh::io::load_path(&dir.join("mesh.obj")).unwrap().0;
+    let theta = geometry::angle_sums(&output);
+    let w = geometry::flattenability(&output, &theta);
+    let wmax = w.iter().copied().fold(0.0, f64::max);
+    assert!(wmax > 1e-6);
+    let theta_in = geometry::angle_sums(&input);
+    let w_in = geometry::flattenability(&input, &theta_in);
+    assert!(
+        wmax <= w_in.iter().copied().fold(0.0, f64::max),
+        "never worse"
+    );
+    assert!(line.contains(&format!("ϖ_max {wmax:.3e} rad")), "{line}");
+    let stuck = w.iter().filter(|&&x| x > 1e-6).count();
+    assert!(line.contains(&format!("{stuck} stuck vertices")), "{line}");
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["converged"], serde_json::json!(false));
+    std::fs::remove_dir_all(&dir).unwrap();
+}

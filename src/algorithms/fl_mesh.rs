@@ -10,13 +10,32 @@
 //! once per mesh, only the numeric one every iteration) and solves for δ and λ.
 //!
 //! Beyond the paper:
+//! - Never worse. Every iterate is compared with the best so far by ϖ_max (among flattenable
+//!   iterates the latest wins, so `until = stationary` still ends at its stationary point);
+//!   the best is returned and `best_iteration` says which it was (0: the input). Over
+//!   refinement rounds likewise: a round whose refinement did not lower ϖ_max is dropped and
+//!   the mesh before it returned. So ϖ_max(out) ≤ ϖ_max(in) always (tests/fl_mesh_corpus.rs
+//!   checks it on every real mesh, the procedural corpus and random and adversarial inputs).
 //! - Step length. The paper always moves by τδ with τ = 0.25 (`step_rule = "fixed"` does
-//!   that). The default `step_rule = "merit"` tries the full step first and halves it until the
-//!   merit φ(v) = ‖(B_p(v) − Λ(v)ᵀλ)/h̄‖² + ‖2π − θ(v)‖² (the KKT residual with the new λ, h̄ the
-//!   mean edge length) decreases by the Armijo rule; a trial that degenerates or flips a
-//!   triangle counts as infinite merit. When no trial decreases φ it falls back to τ. Since H is
-//!   the exact Jacobian of B_p and only λ·∇²θ is neglected, full steps are taken almost always
-//!   and ϖ_max falls quadratically near the end instead of by 0.75 per iteration.
+//!   that). The default `step_rule = "merit"` tries the full step first, shrinking the
+//!   tangential part and then the normal one, and accepts the first trial that lowers
+//!   ‖2π − θ‖₂ by the Armijo rule; when none does it takes the trial with the lowest ϖ_max
+//!   (non-monotone, which lets it cross ridges of ‖2π − θ‖; safe since the best iterate is
+//!   kept) and shifts the (2,2) block harder. `step_rule = "lm"` is monotone
+//!   Levenberg–Marquardt: the (2,2) block −μ I makes the normal step minimise
+//!   ‖2π − θ − Λδ‖² + μ δᵀHδ, μ follows Nielsen's rule on the ratio of actual to predicted
+//!   decrease of ‖2π − θ‖², a refused step doubles the factor. On the corpus (issue 12 note)
+//!   it converges less often than `merit`: its steps are accurate (ratio ≈ 1) but too short
+//!   to leave the shallow valleys of ‖2π − θ‖ the non-monotone rule jumps out of.
+//! - Shape guard (`shape_guard`, off by default). A trial that folds an edge (adjacent
+//!   normals turning by more than 120°, `geometry::FOLD_ANGLE`) that was not folded, or leaves
+//!   a corner below `min_angle` (a face that came in smaller may not get smaller), is refused
+//!   like a degenerate one; with `lm`, the rows of an edge that kept folding are stiffened
+//!   (H scaled by √(s_r s_j), ×4 per refusal) so the next step spreads the change. Measured
+//!   on the corpus this keeps every output fold-free but stalls most garments between 1e-3 and
+//!   1 rad: the normal steps of Eq. 7 reach θ = 2π by creasing the surface, and refusing the
+//!   crease leaves no descent direction. It stays an option until the guard is part of the
+//!   model (a barrier on dihedral and corner angles) rather than a refusal.
 //! - Corrections. After a step (merit rule), up to four re-solves of Eq. 7 with the same
 //!   factorisation and right-hand side [0; h̄·(2π − θ)] at the new point, kept while each
 //!   halves ‖2π − θ‖₂ (a second-order correction: the fairing part of a step is tangent to
@@ -47,7 +66,9 @@
 //! - Obstructions (Sec. 2.3). On a stall, interior vertices whose ϖ stayed among the highest
 //!   (≥ 0.1 ϖ_max) for `stall_iterations` iterations get their fan refined √3-style (Kobbelt):
 //!   each fan triangle is split at its centroid and the spokes are flipped, so the vertex is
-//!   surrounded by new free vertices. New vertices are numbered after the existing ones.
+//!   surrounded by new free vertices. New vertices are numbered after the existing ones. With
+//!   `shape_guard`, a vertex whose refinement would create a corner below `min_angle` is not
+//!   refined.
 //!   After `max_refinements` rounds the run ends with `converged: false` and the stuck
 //!   vertices named.
 //! - Closed components whose Euler characteristic χ ≠ 0 cannot become flattenable
@@ -68,9 +89,9 @@ use crate::linalg::{LdltSolver, LinalgError, LuSolver};
 use crate::mesh::{cross, dot, sub, Mesh, RawMesh, VertexKind, NONE};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
-use std::f64::consts::TAU;
+use std::f64::consts::{PI, TAU};
 
-/// Step-length rule.
+/// Step-length rule (see the module doc).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum StepRule {
@@ -79,6 +100,9 @@ pub enum StepRule {
     Merit,
     /// The paper's fixed damping: X ← X + τδ (Algorithm 1).
     Fixed,
+    /// Levenberg–Marquardt: μ of the (2,2) block from the ratio of actual to predicted
+    /// decrease of ‖2π − θ‖²; monotone.
+    Lm,
 }
 
 /// What v⁰ in J_pos (Eq. 5) is.
@@ -147,6 +171,15 @@ pub struct Params {
     pub stall_iterations: usize,
     /// `ldlt` (default) or `lu`.
     pub linear_solver: LinearSolver,
+    /// Shape guard: refuse steps that fold an edge (adjacent normals turning by more than
+    /// 120°) or leave a corner below `min_angle`. Off by default for now: the normal steps
+    /// of Eq. 7 concentrate the change into creases, and refusing them stalls most garments
+    /// (see the module doc).
+    pub shape_guard: bool,
+    /// With `shape_guard`: smallest corner angle, degrees, a step may leave in a triangle it
+    /// moves (a triangle that came in with a smaller one is never made worse than it was).
+    /// With the guard, refinement never creates a smaller corner either.
+    pub min_angle: f64,
 }
 
 impl Default for Params {
@@ -165,6 +198,8 @@ impl Default for Params {
             max_refinements: 3,
             stall_iterations: 16,
             linear_solver: LinearSolver::Ldlt,
+            shape_guard: false,
+            min_angle: 2.0,
         }
     }
 }
@@ -215,6 +250,12 @@ impl Params {
                 format!("must be in 1..=100000, got {}", self.max_iterations),
             ));
         }
+        if !(self.min_angle >= 0.0 && self.min_angle < 60.0) {
+            return Err(bad(
+                "min_angle",
+                format!("must be in [0, 60) degrees, got {}", self.min_angle),
+            ));
+        }
         if self.max_refinements > 20 {
             return Err(bad(
                 "max_refinements",
@@ -244,13 +285,18 @@ pub struct HistoryEntry {
     pub step_length: f64,
     /// Feasibility corrections taken after the step with the same factorisation.
     pub corrections: usize,
+    /// Levenberg–Marquardt parameter μ of the (2,2) block for the next iteration.
+    pub damping: f64,
 }
 
 /// What a run found, besides the mesh.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct Report {
-    /// Newton iterations taken.
+    /// Newton iterations taken (factorisations, rejected steps included).
     pub iterations: usize,
+    /// The iteration whose iterate is returned (0: the input): the best by ϖ_max, the latest
+    /// among flattenable ones.
+    pub best_iteration: usize,
     /// ϖ_max ≤ tolerance on the output (and the step criterion, for `until = stationary`).
     pub converged: bool,
     /// Why the run ended.
@@ -322,6 +368,9 @@ pub fn solve(
     };
     let mut anchors: Vec<[f64; 3]> = mesh.positions().to_vec();
     let mut rounds = 0usize;
+    // The best result over the refinement rounds: (ϖ_max, mesh, refined count, best iteration,
+    // stationarity, free vertices). A round whose refinement did not lower ϖ_max is dropped.
+    let mut best: Option<(f64, Mesh, usize, usize, f64, usize)> = None;
     loop {
         let mut sys = System::new(&current, &impossible, params)?;
         let end = sys.iterate(
@@ -335,8 +384,17 @@ pub fn solve(
         current = current
             .with_positions(sys.pos.clone())
             .map_err(|e| AlgoError::Input(format!("fl-mesh produced an invalid mesh: {e}")))?;
-        report.stationarity = sys.stationarity;
-        report.free_vertices = sys.n;
+        let wmax = violation(&sys.theta).0;
+        if best.as_ref().is_none_or(|b| wmax < b.0) {
+            best = Some((
+                wmax,
+                current.clone(),
+                report.refined.len(),
+                report.best_iteration,
+                sys.stationarity,
+                sys.n,
+            ));
+        }
         match end {
             End::Stalled(stuck)
                 if params.refine
@@ -344,8 +402,16 @@ pub fn solve(
                     && report.iterations < params.max_iterations
                     && !stuck.is_empty() =>
             {
+                let min_angle = if params.shape_guard {
+                    params.min_angle.to_radians()
+                } else {
+                    0.0
+                };
+                let chosen = independent(&current, &stuck, min_angle);
+                if chosen.is_empty() {
+                    break;
+                }
                 rounds += 1;
-                let chosen = independent(&current, &stuck);
                 control.progress(&Progress {
                     stage: "refine".into(),
                     iteration: rounds,
@@ -372,6 +438,21 @@ pub fn solve(
             End::Done(reason) => report.stop_reason = reason,
         }
         break;
+    }
+    if let Some((_, mesh, refined, best_iteration, stationarity, free)) = best {
+        if refined < report.refined.len() {
+            report.stop_reason = format!(
+                "{}; refining {} more fans did not lower ϖ_max, so the best iterate before \
+                 that refinement is returned",
+                report.stop_reason,
+                report.refined.len() - refined
+            );
+        }
+        report.refined.truncate(refined);
+        current = mesh;
+        report.best_iteration = best_iteration;
+        report.stationarity = stationarity;
+        report.free_vertices = free;
     }
     // The verdict comes from the mesh core's own measure, not from the solver's numbers.
     let theta = crate::geometry::angle_sums(&current);
@@ -462,8 +543,6 @@ struct System {
     /// Free vertices (interior, not in an impossible component), row r ↔ vertex free[r].
     free: Vec<u32>,
     n: usize,
-    /// Row of each vertex, NONE when fixed.
-    row: Vec<u32>,
     /// Per row r: slots slot_start[r]..slot_start[r+1] hold vertex q = free[r] first, then its
     /// ring counter-clockwise; `slot_col` is the row of that vertex (NONE when fixed).
     slot_start: Vec<usize>,
@@ -493,14 +572,40 @@ struct System {
     stationarity: f64,
     /// Where the (2,2) block's diagonal starts in `values`.
     reg_start: usize,
+    /// Best iterate of the round by ϖ_max.
+    best_pos: Vec<[f64; 3]>,
+    best_wmax: f64,
+    /// Shape guard: faces that touch a free vertex, the smallest corner angle each may take,
+    /// edges (their two faces) that must not fold, and unit face normals of the trial.
+    active_faces: Vec<u32>,
+    floor: Vec<f64>,
+    guarded_edges: Vec<[u32; 2]>,
+    trial_normal: Vec<[f64; 3]>,
+    /// Row of each vertex (NONE when fixed).
+    row: Vec<u32>,
+    /// H's entries (row, column) and values as built; `stiff` scales H symmetrically per row
+    /// (H_rj · √(s_r s_j)) where trial steps kept folding an edge, so that the next steps
+    /// spread the change instead of creasing there.
+    h_pairs: Vec<(u32, u32)>,
+    h_base: Vec<f64>,
+    stiff: Vec<f64>,
+    /// Rows of the vertices of edges the last trials would have folded.
+    folding: Vec<u32>,
+    /// `params.shape_guard`.
+    guard: bool,
 }
 
 const REGULARISATION: f64 = 1e-10;
 const MAX_REFINED_PER_ROUND: usize = 64;
 /// Most feasibility corrections per iteration (each one triangular solve with the same factor).
 const MAX_CORRECTIONS: usize = 4;
-const REGULARISATION_MAX: f64 = 1e2;
-const REGULARISATION_START: f64 = 1e-4;
+/// First Levenberg–Marquardt parameter μ, and the largest: at μ = 1e8 a step is a gradient
+/// step of ~1e-8 of the violation, so refusing it means no step can help.
+const MU_START: f64 = 1e-4;
+/// Factor by which H's rows are stiffened around an edge a trial step folded, and the cap.
+const STIFFEN: f64 = 4.0;
+const STIFF_MAX: f64 = 1e6;
+const MU_MAX: f64 = 1e8;
 /// Most tangential (fairness) movement per iteration, in mean edge lengths.
 const TANGENT_RADIUS: f64 = 0.5;
 
@@ -520,16 +625,19 @@ impl System {
         let n = free.len();
         let mut entries: Vec<(usize, usize)> = Vec::new();
         let mut values: Vec<f64> = Vec::new();
-        // H ⊗ I3 (Eq. 10): constant.
+        // H ⊗ I3 (Eq. 10): constant but for the stiffening of folding regions.
+        let mut h_pairs: Vec<(u32, u32)> = Vec::new();
         for (r, &v) in free.iter().enumerate() {
             let ring = conn.ring_of(v);
             let di = ring.len() as f64;
             for c in 0..3 {
                 entries.push((c * n + r, c * n + r));
                 values.push(params.w1 + params.w2);
+                h_pairs.push((r as u32, r as u32));
                 for &p in ring {
                     let j = row[p as usize];
                     if j != NONE {
+                        h_pairs.push((r as u32, j));
                         entries.push((c * n + r, c * n + j as usize));
                         values.push(match params.linear_solver {
                             LinearSolver::Lu => -params.w1 / di,
@@ -591,10 +699,11 @@ impl System {
             }
         };
         let ns = slot_vertex.len();
+        let (active_faces, floor, guarded_edges) = shape_guard(mesh, &row, params);
+        let h_base = values[..h_pairs.len()].to_vec();
         Ok(System {
             free,
             n,
-            row,
             slot_start,
             slot_vertex,
             slot_col,
@@ -613,11 +722,51 @@ impl System {
             correction: vec![[0.0; 3]; n],
             stationarity: 0.0,
             reg_start,
+            best_pos: mesh.positions().to_vec(),
+            best_wmax: f64::INFINITY,
+            active_faces,
+            floor,
+            guarded_edges,
+            trial_normal: crate::geometry::face_normals(mesh),
+            row,
+            h_pairs,
+            h_base,
+            stiff: vec![1.0; n],
+            folding: Vec::new(),
+            guard: params.shape_guard,
         })
     }
 
+    /// Newton iterations on the current connectivity. Leaves the best iterate of the round (by
+    /// ϖ_max, the latest among flattenable ones) in `pos`, `theta` and `grad`.
     #[allow(clippy::too_many_arguments)]
     fn iterate(
+        &mut self,
+        mesh: &Mesh,
+        anchors: &mut [[f64; 3]],
+        grid: Option<&crate::spatial::TriangleGrid>,
+        params: &Params,
+        control: &dyn Control,
+        report: &mut Report,
+    ) -> Result<End, AlgoError> {
+        let end = self.iterate_inner(mesh, anchors, grid, params, control, report);
+        if self.best_wmax < violation(&self.theta).0 {
+            std::mem::swap(&mut self.pos, &mut self.best_pos);
+            eval(
+                &self.pos,
+                mesh.triangles(),
+                mesh.conn(),
+                &self.free,
+                &self.slot_start,
+                &mut self.theta,
+                &mut self.grad,
+            );
+        }
+        end
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn iterate_inner(
         &mut self,
         mesh: &Mesh,
         anchors: &mut [[f64; 3]],
@@ -629,25 +778,6 @@ impl System {
         let tris = mesh.triangles();
         let conn = mesh.conn();
         let n = self.n;
-        if n == 0 {
-            return Ok(End::Done("no free interior vertex".into()));
-        }
-        let mut lambda = vec![0.0; n];
-        let mut delta = vec![[0.0; 3]; n];
-        let mut dn = vec![[0.0; 3]; n];
-        let mut dt = vec![[0.0; 3]; n];
-        let mut wmax_window: std::collections::VecDeque<f64> = Default::default();
-        let mut high_streak = vec![0usize; n];
-        let mut last_step: Option<f64> = None;
-        // Levenberg–Marquardt-like shift of the (2,2) block: small while full steps are taken,
-        // larger when the linearisation of θ fails (near-planar fans, where ∂θ → 0 and the
-        // Gauss–Newton correction blows up).
-        let mut reg = REGULARISATION_START;
-        // Weight of the tangential (fairing) part with `until = flattenable`: halved whenever
-        // ϖ_max did not fall over an iteration, so that the fairing, which only shapes the
-        // path there, cannot keep undoing the normal steps (ends as pure Gauss–Newton).
-        let mut fair = 1.0f64;
-        let mut prev_wmax = f64::INFINITY;
         eval(
             &self.pos,
             tris,
@@ -657,17 +787,34 @@ impl System {
             &mut self.theta,
             &mut self.grad,
         );
+        let (mut wmax, mut c2) = violation(&self.theta);
+        self.best_pos.clone_from(&self.pos);
+        self.best_wmax = wmax;
+        if n == 0 {
+            return Ok(End::Done("no free interior vertex".into()));
+        }
+        let mut lambda = vec![0.0; n];
+        let mut delta = vec![[0.0; 3]; n];
+        let mut dn = vec![[0.0; 3]; n];
+        let mut dt = vec![[0.0; 3]; n];
+        let mut window: std::collections::VecDeque<f64> = Default::default();
+        let mut high_streak = vec![0usize; n];
+        let mut last_step: Option<f64> = None;
+        // Levenberg–Marquardt parameter: the (2,2) block is −μ I, so the normal step minimises
+        // ‖c − Λδ‖² + μ δᵀHδ (c = 2π − θ). Nielsen's update from the ratio ρ of actual to
+        // predicted decrease of ‖c‖²; a rejected step multiplies μ by ν, which doubles.
+        let (mut mu, mut nu) = match params.step_rule {
+            StepRule::Merit | StepRule::Lm => (MU_START, 2.0),
+            StepRule::Fixed => (REGULARISATION, 2.0),
+        };
+        // Weight of the tangential (fairing) part with `until = flattenable`: halved whenever
+        // ϖ_max did not fall over an iteration, so that the fairing, which only shapes the
+        // path there, cannot keep undoing the normal steps.
+        let mut fair = 1.0f64;
+        let mut prev_wmax = f64::INFINITY;
         loop {
             if control.cancelled() {
                 return Err(AlgoError::Cancelled);
-            }
-            let wmax = self
-                .theta
-                .iter()
-                .map(|t| (TAU - t).abs())
-                .fold(0.0, f64::max);
-            if !wmax.is_finite() {
-                return Ok(End::Done("non-finite angle sum".into()));
             }
             let flat = wmax <= params.tolerance;
             if flat && params.until == Until::Flattenable {
@@ -678,6 +825,7 @@ impl System {
                     if flat {
                         return Ok(End::Done("stationary".into()));
                     }
+                    report.stop_reason = "stalled: step below step_tolerance".into();
                     return Ok(End::Stalled(self.stuck(&high_streak, params)));
                 }
             }
@@ -689,19 +837,20 @@ impl System {
                     End::Stalled(Vec::new())
                 });
             }
-            // Stall: ϖ_max has not halved over the window.
             for (r, t) in self.theta.iter().enumerate() {
-                if (TAU - t).abs() >= 0.1 * wmax && (TAU - t).abs() > params.tolerance {
+                let w = (TAU - t).abs();
+                if w >= 0.1 * wmax && w > params.tolerance {
                     high_streak[r] += 1;
                 } else {
                     high_streak[r] = 0;
                 }
             }
-            wmax_window.push_back(wmax);
-            if wmax_window.len() > params.stall_iterations {
-                let old = wmax_window.pop_front().unwrap_or(wmax);
+            // Stall: ϖ_max has not halved over the window.
+            window.push_back(wmax);
+            if window.len() > params.stall_iterations {
+                let old = window.pop_front().unwrap_or(wmax);
                 if !flat && wmax > 0.5 * old {
-                    report.stop_reason = "stalled".into();
+                    report.stop_reason = "stalled: ϖ_max did not halve".into();
                     return Ok(End::Stalled(self.stuck(&high_streak, params)));
                 }
             }
@@ -714,45 +863,22 @@ impl System {
                 fair *= 0.5;
             }
             prev_wmax = wmax;
-            // Assemble Λ (Eq. 11–13), scaled by h̄ so that every block is O(1).
-            let h = self.h;
-            for r in 0..n {
-                for s in self.slot_start[r]..self.slot_start[r + 1] {
-                    let k = self.slot_value[s];
-                    if k == NONE {
-                        continue;
-                    }
-                    let g = self.grad[s];
-                    let k = k as usize;
-                    for c in 0..3 {
-                        self.values[k + c] = h * g[c];
-                        self.values[k + 3 + c] = h * g[c];
-                    }
-                }
-            }
-            // Two right-hand sides with one factorisation (Eq. 7 is linear in B): the normal
-            // step δ_n for [0; h̄·B_λ] (Eq. 9) and the tangential step δ_t for [B_p; 0]
-            // (Eq. 8). Their sum is the paper's δ.
-            for (r, &v) in self.free.iter().enumerate() {
-                let b = b_p(&self.pos, anchors, conn.ring_of(v), v, params);
-                for c in 0..3 {
-                    self.rhs[c * n + r] = 0.0;
-                    self.rhs[4 * n + c * n + r] = b[c];
-                }
-                self.rhs[3 * n + r] = h * (TAU - self.theta[r]);
-                self.rhs[7 * n + r] = 0.0;
-            }
-            for v in &mut self.values[self.reg_start..] {
-                *v = -reg;
-            }
+            self.assemble(conn, anchors, params, mu);
             let solved = self
                 .lu
                 .factor(&self.values)
                 .and_then(|_| self.lu.solve_two_in_place(&mut self.rhs));
+            report.iterations += 1;
             if let Err(e) = solved {
+                if params.step_rule != StepRule::Fixed && mu < MU_MAX {
+                    mu = (mu * 100.0).min(MU_MAX);
+                    self.push_history(report, control, wmax, 0.0, 0.0, 0, mu);
+                    continue;
+                }
                 report.stop_reason = format!("linear solve failed: {e}");
                 return Ok(End::Stalled(self.stuck(&high_streak, params)));
             }
+            let h = self.h;
             let mut step_norm = 0.0f64;
             let mut tan_norm = 0.0f64;
             for r in 0..n {
@@ -767,33 +893,27 @@ impl System {
             step_norm /= h;
             tan_norm /= h;
             self.stationarity = self.force_residual_max(conn, anchors, &lambda, params, false);
-            let alpha = match params.step_rule {
+            let (alpha, corrections) = match params.step_rule {
                 StepRule::Fixed => {
                     for r in 0..n {
                         delta[r] = [0, 1, 2].map(|c| dn[r][c] + dt[r][c]);
                     }
-                    self.try_step(tris, conn, &delta, params.tau);
-                    params.tau
+                    if !self.try_step(tris, conn, &delta, params.tau) {
+                        report.stop_reason =
+                            "the fixed step degenerates, turns over or folds a triangle".into();
+                        return Ok(End::Stalled(self.stuck(&high_streak, params)));
+                    }
+                    self.accept_trial();
+                    (params.tau, 0)
                 }
                 StepRule::Merit => {
-                    // The fairness part may ask to move far (the uniform Laplacian also
-                    // redistributes vertices); its linearisation of θ is trusted over at most
-                    // half a mean edge length per iteration.
-                    let s = fair * (TANGENT_RADIUS / tan_norm.max(TANGENT_RADIUS));
                     // Trials: the full normal step with the tangential one shrinking to
-                    // nothing, then shorter normal steps. Accept the first that lowers the
-                    // violation ‖2π − θ‖₂ by the Armijo rule (δ_n is a Gauss–Newton step on
-                    // 2π − θ and δ_t is tangent to the constraints, so the violation falls
-                    // for short enough steps) or keeps it within the budget: half the
-                    // tolerance, or 1e-3 rad while `until = stationary` still has fairing to
-                    // do (the next normal steps restore it quadratically).
-                    let budget = if params.until == Until::Stationary
-                        && tan_norm > 100.0 * params.step_tolerance
-                    {
-                        1e-3f64.max(0.5 * params.tolerance)
-                    } else {
-                        0.5 * params.tolerance
-                    };
+                    // nothing, then shorter normal steps. Accept the first that passes the
+                    // shape guard and lowers ‖2π − θ‖₂ by the Armijo rule, or reaches half the
+                    // tolerance; if none does, take the guarded trial with the lowest ϖ_max
+                    // (non-monotone: the best iterate is kept aside, so the output is never
+                    // worse) and shift harder.
+                    let s = fair * (TANGENT_RADIUS / tan_norm.max(TANGENT_RADIUS));
                     const TRIALS: [(f64, f64); 9] = [
                         (1.0, 1.0),
                         (1.0, 0.5),
@@ -805,20 +925,17 @@ impl System {
                         (0.0625, 0.0),
                         (0.015625, 0.0),
                     ];
-                    let mut best = (f64::INFINITY, (params.tau, params.tau * s));
-                    let c2_0 = violation(&self.theta).1;
+                    let mut best = (f64::INFINITY, (0.0, 0.0));
                     let mut accepted = None;
                     for &(an, at) in &TRIALS {
                         for r in 0..n {
                             delta[r] = [0, 1, 2].map(|c| an * dn[r][c] + at * s * dt[r][c]);
                         }
-                        let ok = self.try_step(tris, conn, &delta, 1.0);
-                        let (w, c2) = if ok {
-                            violation(&self.trial_theta)
-                        } else {
-                            (f64::INFINITY, f64::INFINITY)
-                        };
-                        if c2 <= (1.0 - 1e-4 * an) * c2_0 || w <= budget {
+                        if !self.try_step(tris, conn, &delta, 1.0) {
+                            continue;
+                        }
+                        let (w, c1) = violation(&self.trial_theta);
+                        if c1 <= (1.0 - 1e-4 * an) * c2 || w <= 0.5 * params.tolerance {
                             accepted = Some(an);
                             break;
                         }
@@ -826,16 +943,15 @@ impl System {
                             best = (w, (an, at * s));
                         }
                     }
-                    // The shift biases the normal step's residual by about `reg`·λ, so it
-                    // must not ratchet up on every shortened step (on the t-shirt that held
-                    // ϖ_max near 1e-2): it shrinks after a full step, stays after a step of
-                    // ≥ 1/4, and grows only when the linearisation failed outright.
-                    reg = match accepted {
-                        Some(a) if a >= 1.0 => (reg * 0.1).max(REGULARISATION),
-                        Some(a) if a >= 0.25 => reg,
-                        _ => (reg * 10.0).min(REGULARISATION_MAX),
+                    // The shift biases the normal step's residual by about μ·λ, so it must not
+                    // ratchet up on every shortened step: it shrinks after a full step, stays
+                    // after a step of ≥ 1/4, and grows when the linearisation failed.
+                    mu = match accepted {
+                        Some(a) if a >= 1.0 => (mu * 0.1).max(REGULARISATION),
+                        Some(a) if a >= 0.25 => mu,
+                        _ => (mu * 10.0).min(MU_MAX),
                     };
-                    match accepted {
+                    let alpha = match accepted {
                         Some(a) => a,
                         None if best.0.is_finite() => {
                             let (an, at) = best.1;
@@ -845,47 +961,198 @@ impl System {
                             self.try_step(tris, conn, &delta, 1.0);
                             an
                         }
+                        None => 0.0,
+                    };
+                    if alpha > 0.0 {
+                        self.accept_trial();
+                        (alpha, self.correct(tris, conn, params))
+                    } else {
+                        if mu >= MU_MAX {
+                            report.stop_reason =
+                                "stalled: every step degenerates or folds a triangle".into();
+                            return Ok(End::Stalled(self.stuck(&high_streak, params)));
+                        }
+                        (0.0, 0)
+                    }
+                }
+                StepRule::Lm => {
+                    // The fairness part may ask to move far (the uniform Laplacian also
+                    // redistributes vertices); its linearisation of θ is trusted over at most
+                    // half a mean edge length per iteration.
+                    let s = fair * (TANGENT_RADIUS / tan_norm.max(TANGENT_RADIUS));
+                    let trials: [(f64, f64); 3] = [(1.0, s), (1.0, 0.0), (0.5, 0.0)];
+                    let mut accepted = None;
+                    self.folding.clear();
+                    for (k, &(an, at)) in trials.iter().enumerate() {
+                        if k == 1 && at == 0.0 && trials[0].1 == 0.0 {
+                            continue;
+                        }
+                        for r in 0..n {
+                            delta[r] = [0, 1, 2].map(|c| an * dn[r][c] + at * dt[r][c]);
+                        }
+                        let predicted = c2 * c2 - self.linearised_violation(&delta);
+                        if !self.try_step(tris, conn, &delta, 1.0) {
+                            continue;
+                        }
+                        let (w1, c1) = violation(&self.trial_theta);
+                        let rho = (c2 * c2 - c1 * c1) / predicted.max(f64::MIN_POSITIVE);
+                        if rho > 1e-4 || w1 <= 0.5 * params.tolerance {
+                            accepted = Some((an, rho));
+                            break;
+                        }
+                    }
+                    match accepted {
+                        Some((an, rho)) => {
+                            if an >= 1.0 {
+                                let f = 1.0 - (2.0 * rho.min(1.0) - 1.0).powi(3);
+                                mu = (mu * f.max(1.0 / 3.0)).max(REGULARISATION);
+                            }
+                            nu = 2.0;
+                            self.accept_trial();
+                            (an, self.correct(tris, conn, params))
+                        }
                         None => {
-                            // Every trial degenerates a triangle: stay, shift harder.
-                            reg = (reg * 100.0).min(REGULARISATION_MAX);
-                            self.trial_pos.copy_from_slice(&self.pos);
-                            self.trial_theta.copy_from_slice(&self.theta);
-                            self.trial_grad.copy_from_slice(&self.grad);
-                            0.0
+                            if mu >= MU_MAX {
+                                report.stop_reason =
+                                    "stalled: no step lowers ‖2π − θ‖ without folding".into();
+                                return Ok(End::Stalled(self.stuck(&high_streak, params)));
+                            }
+                            if !self.stiffen_folding() {
+                                mu = (mu * nu).min(MU_MAX);
+                                nu *= 2.0;
+                            }
+                            (0.0, 0)
                         }
                     }
                 }
             };
-            // Accept the trial state (try_step left it in trial_*); a step that degenerates a
-            // triangle even at the fallback length is refused.
-            if !self.trial_valid(tris) {
-                report.stop_reason = "every step length degenerates a triangle".into();
-                return Ok(End::Stalled(self.stuck(&high_streak, params)));
+            (wmax, c2) = violation(&self.theta);
+            if alpha > 0.0 {
+                last_step = Some(alpha * step_norm);
             }
-            std::mem::swap(&mut self.pos, &mut self.trial_pos);
-            std::mem::swap(&mut self.theta, &mut self.trial_theta);
-            std::mem::swap(&mut self.grad, &mut self.trial_grad);
-            let corrections = if params.step_rule == StepRule::Merit {
-                self.correct(tris, conn, params)
-            } else {
-                0
-            };
-            report.iterations += 1;
-            last_step = Some(step_norm);
-            report.history.push(HistoryEntry {
-                iteration: report.iterations,
-                max_flattenability: wmax,
+            let better = wmax < self.best_wmax
+                || (wmax <= params.tolerance && self.best_wmax <= params.tolerance);
+            if better {
+                self.best_pos.copy_from_slice(&self.pos);
+                self.best_wmax = wmax;
+                report.best_iteration = report.iterations;
+            }
+            self.push_history(
+                report,
+                control,
+                prev_wmax,
                 step_norm,
-                step_length: alpha,
+                alpha,
                 corrections,
-            });
-            control.progress(&Progress {
-                stage: "newton".into(),
-                iteration: report.iterations,
-                max_flattenability: Some(wmax),
-                step_norm: Some(step_norm),
-            });
+                mu,
+            );
         }
+    }
+
+    /// Fill Λ (Eq. 11–13, scaled by h̄ so that every block is O(1)), the two right-hand sides
+    /// (normal [0; h̄·B_λ] of Eq. 9 and tangential [B_p; 0] of Eq. 8: Eq. 7 is linear in B, so
+    /// their solutions add up to the paper's δ) and the (2,2) block −μ I.
+    fn assemble(
+        &mut self,
+        conn: &crate::mesh::Connectivity,
+        anchors: &[[f64; 3]],
+        params: &Params,
+        mu: f64,
+    ) {
+        let n = self.n;
+        let h = self.h;
+        for r in 0..n {
+            for s in self.slot_start[r]..self.slot_start[r + 1] {
+                let k = self.slot_value[s];
+                if k == NONE {
+                    continue;
+                }
+                let g = self.grad[s];
+                let k = k as usize;
+                for c in 0..3 {
+                    self.values[k + c] = h * g[c];
+                    self.values[k + 3 + c] = h * g[c];
+                }
+            }
+        }
+        for (r, &v) in self.free.iter().enumerate() {
+            let b = b_p(&self.pos, anchors, conn.ring_of(v), v, params);
+            for c in 0..3 {
+                self.rhs[c * n + r] = 0.0;
+                self.rhs[4 * n + c * n + r] = b[c];
+            }
+            self.rhs[3 * n + r] = h * (TAU - self.theta[r]);
+            self.rhs[7 * n + r] = 0.0;
+        }
+        for v in &mut self.values[self.reg_start..] {
+            *v = -mu;
+        }
+        for (k, &(r, j)) in self.h_pairs.iter().enumerate() {
+            self.values[k] =
+                self.h_base[k] * (self.stiff[r as usize] * self.stiff[j as usize]).sqrt();
+        }
+    }
+
+    /// Stiffen the rows of edges that trials folded (and forget them); true when any was.
+    fn stiffen_folding(&mut self) -> bool {
+        let any = !self.folding.is_empty();
+        self.folding.sort_unstable();
+        self.folding.dedup();
+        for &r in &self.folding {
+            self.stiff[r as usize] = (self.stiff[r as usize] * STIFFEN).min(STIFF_MAX);
+        }
+        self.folding.clear();
+        any
+    }
+
+    /// ‖2π − θ − Λδ‖²: the violation the linearisation predicts after the step δ.
+    fn linearised_violation(&self, delta: &[[f64; 3]]) -> f64 {
+        let mut sum = 0.0;
+        for r in 0..self.n {
+            let mut lin = TAU - self.theta[r];
+            for s in self.slot_start[r]..self.slot_start[r + 1] {
+                let j = self.slot_col[s];
+                if j != NONE {
+                    lin -= dot(self.grad[s], delta[j as usize]);
+                }
+            }
+            sum += lin * lin;
+        }
+        sum
+    }
+
+    /// Make the trial state (left by `try_step`) the current one.
+    fn accept_trial(&mut self) {
+        std::mem::swap(&mut self.pos, &mut self.trial_pos);
+        std::mem::swap(&mut self.theta, &mut self.trial_theta);
+        std::mem::swap(&mut self.grad, &mut self.trial_grad);
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn push_history(
+        &self,
+        report: &mut Report,
+        control: &dyn Control,
+        wmax: f64,
+        step_norm: f64,
+        alpha: f64,
+        corrections: usize,
+        mu: f64,
+    ) {
+        report.history.push(HistoryEntry {
+            iteration: report.iterations,
+            max_flattenability: wmax,
+            step_norm,
+            step_length: alpha,
+            corrections,
+            damping: mu,
+        });
+        control.progress(&Progress {
+            stage: "newton".into(),
+            iteration: report.iterations,
+            max_flattenability: Some(self.best_wmax),
+            step_norm: Some(step_norm),
+        });
     }
 
     /// Feasibility corrections with the factorisation already computed (a chord / second-order
@@ -987,24 +1254,48 @@ impl System {
         self.trial_valid(tris)
     }
 
-    /// No triangle touching a free vertex degenerates or turns over relative to `pos`.
-    fn trial_valid(&self, tris: &[[u32; 3]]) -> bool {
+    /// The shape guard on the trial: no triangle touching a free vertex degenerates, turns over
+    /// relative to `pos` or gets a corner below its floor, and no guarded edge folds.
+    fn trial_valid(&mut self, tris: &[[u32; 3]]) -> bool {
         let tiny = 1e-12 * self.h * self.h;
-        for t in tris {
-            if t.iter().all(|&v| self.row[v as usize] == NONE) {
-                continue;
-            }
+        for (k, &f) in self.active_faces.iter().enumerate() {
+            let t = tris[f as usize];
             let p = |q: &[[f64; 3]], i: usize| q[t[i] as usize];
-            let n1 = cross(
-                sub(p(&self.trial_pos, 1), p(&self.trial_pos, 0)),
-                sub(p(&self.trial_pos, 2), p(&self.trial_pos, 0)),
+            let (a, b, c) = (
+                p(&self.trial_pos, 0),
+                p(&self.trial_pos, 1),
+                p(&self.trial_pos, 2),
             );
+            let n1 = cross(sub(b, a), sub(c, a));
             let n0 = cross(
                 sub(p(&self.pos, 1), p(&self.pos, 0)),
                 sub(p(&self.pos, 2), p(&self.pos, 0)),
             );
             let a1 = dot(n1, n1).sqrt();
             if a1.is_nan() || a1 <= tiny || dot(n1, n0) <= 0.0 {
+                return false;
+            }
+            if !self.guard {
+                continue;
+            }
+            let floor = self.floor[k];
+            if corner_angle(a, b, c) < floor
+                || corner_angle(b, c, a) < floor
+                || corner_angle(c, a, b) < floor
+            {
+                return false;
+            }
+            self.trial_normal[f as usize] = [n1[0] / a1, n1[1] / a1, n1[2] / a1];
+        }
+        let limit = crate::geometry::FOLD_ANGLE.cos();
+        for &[f, g] in self.guarded_edges.iter().filter(|_| self.guard) {
+            if dot(self.trial_normal[f as usize], self.trial_normal[g as usize]) < limit {
+                for v in tris[f as usize].iter().chain(&tris[g as usize]) {
+                    let r = self.row[*v as usize];
+                    if r != NONE {
+                        self.folding.push(r);
+                    }
+                }
                 return false;
             }
         }
@@ -1154,6 +1445,42 @@ fn eval(
     }
 }
 
+/// What the shape guard checks on `mesh` with free vertices `row != NONE`: the faces touching
+/// a free vertex with each one's angle floor (the smaller of `min_angle` and its own smallest
+/// angle now, so a face is never made worse than it came), and the edges between two faces, one
+/// of them active, that are not folded now (they must not fold).
+fn shape_guard(mesh: &Mesh, row: &[u32], params: &Params) -> (Vec<u32>, Vec<f64>, Vec<[u32; 2]>) {
+    let tris = mesh.triangles();
+    let active: Vec<bool> = tris
+        .iter()
+        .map(|t| t.iter().any(|&v| row[v as usize] != NONE))
+        .collect();
+    let min_angle = params.min_angle.to_radians();
+    let mut faces = Vec::new();
+    let mut floor = Vec::new();
+    for (f, &a) in active.iter().enumerate() {
+        if a {
+            let [p, q, r] = mesh.face_positions(f);
+            let m = corner_angle(p, q, r)
+                .min(corner_angle(q, r, p))
+                .min(corner_angle(r, p, q));
+            faces.push(f as u32);
+            floor.push(min_angle.min(m));
+        }
+    }
+    let normals = crate::geometry::face_normals(mesh);
+    let limit = crate::geometry::FOLD_ANGLE.cos();
+    let edges = mesh
+        .conn()
+        .edge_faces()
+        .iter()
+        .filter(|e| e[1] != NONE && (active[e[0] as usize] || active[e[1] as usize]))
+        .filter(|e| dot(normals[e[0] as usize], normals[e[1] as usize]) >= limit)
+        .copied()
+        .collect();
+    (faces, floor, edges)
+}
+
 fn mean_edge_length(mesh: &Mesh) -> f64 {
     let e = mesh.conn().edges();
     if e.is_empty() {
@@ -1169,13 +1496,18 @@ fn mean_edge_length(mesh: &Mesh) -> f64 {
         / e.len() as f64
 }
 
-/// A subset of `stuck` with pairwise disjoint fans (no two adjacent), worst first.
-fn independent(mesh: &Mesh, stuck: &[u32]) -> Vec<u32> {
+/// A subset of `stuck` with pairwise disjoint fans (no two adjacent), worst first, leaving
+/// out vertices whose refinement would create a corner below `min_angle` (radians; 0 skips
+/// the check).
+fn independent(mesh: &Mesh, stuck: &[u32], min_angle: f64) -> Vec<u32> {
     let conn = mesh.conn();
     let mut blocked = vec![false; mesh.num_vertices()];
     let mut out = Vec::new();
     for &v in stuck {
         if blocked[v as usize] || !conn.is_interior(v) {
+            continue;
+        }
+        if min_angle > 0.0 && smallest_after_refining(mesh, v) < min_angle {
             continue;
         }
         out.push(v);
@@ -1185,6 +1517,22 @@ fn independent(mesh: &Mesh, stuck: &[u32]) -> Vec<u32> {
         }
     }
     out
+}
+
+/// The smallest corner of the triangles that refining `v`'s fan would leave.
+fn smallest_after_refining(mesh: &Mesh, v: u32) -> f64 {
+    let raw = refine_sqrt3(mesh, &[v]);
+    let old_fan = mesh.conn().fan_of(v).iter().map(|&hc| hc as usize / 3);
+    raw.triangles[mesh.num_faces()..]
+        .iter()
+        .chain(old_fan.map(|f| &raw.triangles[f]))
+        .map(|t| {
+            let [a, b, c] = t.map(|i| raw.positions[i as usize]);
+            corner_angle(a, b, c)
+                .min(corner_angle(b, c, a))
+                .min(corner_angle(c, a, b))
+        })
+        .fold(PI, f64::min)
 }
 
 /// √3-style refinement of the fans of `vertices` (Kobbelt, as Sec. 2.3 suggests): every fan

@@ -271,3 +271,30 @@ pub fn patch_total_curvature(mesh: &Mesh, patch: u32) -> f64 {
     }
     total
 }
+
+/// Adjacent face normals turning by more than this count as a fold (120°): a crease a sheet
+/// could only take by creasing it hard, never a smooth drape.
+pub const FOLD_ANGLE: f64 = 2.0 * PI / 3.0;
+
+/// Edges with two faces whose unit normals turn by more than [`FOLD_ANGLE`] (seams included:
+/// a fold across a seam is still a fold).
+pub fn fold_edges(mesh: &Mesh) -> Vec<u32> {
+    let fnrm = face_normals(mesh);
+    let limit = FOLD_ANGLE.cos();
+    mesh.conn()
+        .edge_faces()
+        .iter()
+        .enumerate()
+        .filter(|(_, f)| f[1] != crate::mesh::NONE)
+        .filter(|(_, f)| dot(fnrm[f[0] as usize], fnrm[f[1] as usize]) < limit)
+        .map(|(e, _)| e as u32)
+        .collect()
+}
+
+/// The smallest corner angle of every face.
+pub fn min_corner_angles(mesh: &Mesh) -> Vec<f64> {
+    corner_angles(mesh)
+        .into_iter()
+        .map(|a| a[0].min(a[1]).min(a[2]))
+        .collect()
+}

@@ -1,0 +1,261 @@
+//! The regression corpus for the optimisers: procedural hard cases generated at several sizes
+//! and noise levels, the real open meshes of `../shared/meshes` (listed by its MANIFEST.tsv),
+//! and measures of a result taken from geometry alone (never from a solver's own figures).
+//!
+//! Tests and benchmarks share it so that both judge the same meshes the same way.
+
+use crate::fixtures::{grid, SplitMix};
+use crate::geometry;
+use crate::mesh::{dot, sub, Mesh, RawMesh};
+use std::f64::consts::{PI, TAU};
+use std::path::{Path, PathBuf};
+
+/// A procedural family: a smooth surface over a grid, with normal noise on interior vertices.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Family {
+    /// z = (x² − y²)/2 over [−1, 1]²: negative curvature everywhere (θ > 2π).
+    Saddle,
+    /// z = (2 − x² − y²)/2 over [−1, 1]²: positive curvature everywhere (θ < 2π).
+    Dome,
+    /// z = 0.15 sin(3πx) over [−1, 1]²: a developable corrugated sheet (pleats).
+    Pleats,
+    /// A cone sector, half-angle 30°, rulings 1 to 2.5 from the apex, angle 4π/3.
+    Cone,
+    /// A closed band (two boundary loops), radius 1 bulging to 1.1 at mid-height, height 2.
+    Tube,
+}
+
+impl Family {
+    /// Every family.
+    pub const ALL: [Family; 5] = [
+        Family::Saddle,
+        Family::Dome,
+        Family::Pleats,
+        Family::Cone,
+        Family::Tube,
+    ];
+
+    /// Lower-case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Family::Saddle => "saddle",
+            Family::Dome => "dome",
+            Family::Pleats => "pleats",
+            Family::Cone => "cone",
+            Family::Tube => "tube",
+        }
+    }
+}
+
+/// One procedural case.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Procedural {
+    /// Surface family.
+    pub family: Family,
+    /// About this many faces.
+    pub faces: usize,
+    /// Standard deviation of the normal noise, as a fraction of the mean edge length.
+    pub noise: f64,
+}
+
+impl Procedural {
+    /// `family-faces-noise`, e.g. `saddle-7700-0.05`.
+    pub fn name(&self) -> String {
+        format!("{}-{}-{}", self.family.name(), self.faces, self.noise)
+    }
+
+    /// The mesh (deterministic: the seed is derived from the parameters).
+    pub fn mesh(&self) -> Mesh {
+        let cells = (self.faces as f64 / 2.0).sqrt().round().max(2.0) as usize;
+        let (nu, nv, wrap) = match self.family {
+            Family::Tube => {
+                // Cells about square on a tube of circumference 2π and height 2.
+                let nv = ((cells * cells) as f64 / PI).sqrt().round().max(2.0) as usize;
+                ((cells * cells / nv).max(3), nv, true)
+            }
+            Family::Cone => (cells * 3 / 2, cells * 2 / 3, false),
+            _ => (cells, cells, false),
+        };
+        let f = |i: usize, j: usize| -> [f64; 3] {
+            let (s, t) = (i as f64 / nu as f64, j as f64 / nv as f64);
+            let (x, y) = (2.0 * s - 1.0, 2.0 * t - 1.0);
+            match self.family {
+                Family::Saddle => [x, y, 0.5 * (x * x - y * y)],
+                Family::Dome => [x, y, 0.5 * (2.0 - x * x - y * y)],
+                Family::Pleats => [x, y, 0.15 * (3.0 * PI * x).sin()],
+                Family::Cone => {
+                    let (alpha, phi, r) = (PI / 6.0, 4.0 / 3.0 * PI * s, 1.0 + 1.5 * t);
+                    [
+                        r * alpha.sin() * phi.cos(),
+                        r * alpha.sin() * phi.sin(),
+                        r * alpha.cos(),
+                    ]
+                }
+                Family::Tube => {
+                    let (phi, z) = (TAU * s, 2.0 * t);
+                    let r = 1.0 + 0.1 * (PI * t).sin();
+                    [r * phi.cos(), r * phi.sin(), z]
+                }
+            }
+        };
+        let (positions, triangles, _) = grid(nu, nv, wrap, f, |_, _| true);
+        let n = triangles.len();
+        let raw = RawMesh {
+            positions,
+            triangles,
+            face_patch: vec![0; n],
+            patch_names: vec![self.family.name().into()],
+            uv: None,
+        };
+        let mesh = Mesh::new(raw).expect("procedural mesh is valid").0;
+        let seed = (self.faces as u64) << 20 ^ (self.noise * 1e6) as u64 ^ self.family as u64;
+        with_normal_noise(&mesh, self.noise, seed)
+    }
+}
+
+/// The procedural corpus: every family at three sizes (saddles and domes from 2k to 45k faces)
+/// and two noise levels.
+pub fn procedural() -> Vec<Procedural> {
+    let mut out = Vec::new();
+    for family in Family::ALL {
+        let sizes: &[usize] = match family {
+            Family::Saddle | Family::Dome => &[2_000, 7_700, 45_000],
+            _ => &[2_000, 7_700],
+        };
+        for &faces in sizes {
+            for noise in [0.01, 0.1] {
+                out.push(Procedural {
+                    family,
+                    faces,
+                    noise,
+                });
+            }
+        }
+    }
+    out
+}
+
+/// Move every interior vertex along its normal by a normal random amount of standard deviation
+/// `sigma` mean edge lengths (fixed seed); other vertices stay bit-identical.
+pub fn with_normal_noise(mesh: &Mesh, sigma: f64, seed: u64) -> Mesh {
+    let h = mean_edge_length(mesh);
+    let normals = geometry::vertex_normals(mesh);
+    let mut rng = SplitMix(seed);
+    let mut pos = mesh.positions().to_vec();
+    for v in mesh.conn().interior_vertices() {
+        let d = sigma * h * rng.normal();
+        for c in 0..3 {
+            pos[v as usize][c] += d * normals[v as usize][c];
+        }
+    }
+    mesh.with_positions(pos)
+        .expect("noise keeps the mesh valid")
+}
+
+/// Mean edge length.
+pub fn mean_edge_length(mesh: &Mesh) -> f64 {
+    let e = mesh.conn().edges();
+    let p = mesh.positions();
+    let sum: f64 = e
+        .iter()
+        .map(|e| {
+            let d = sub(p[e[0] as usize], p[e[1] as usize]);
+            dot(d, d).sqrt()
+        })
+        .sum();
+    sum / e.len().max(1) as f64
+}
+
+/// Where the shared meshes live, relative to the crate root.
+pub const SHARED_MESHES: &str = "../shared/meshes";
+
+/// The open-surface meshes listed in `root/MANIFEST.tsv` (column `surface` starting with
+/// "open"), as paths; `None` when the manifest is missing.
+pub fn shared_open_meshes(root: &Path) -> Option<Vec<PathBuf>> {
+    shared_meshes_where(root, |surface| surface.starts_with("open"))
+}
+
+/// The closed meshes listed in `root/MANIFEST.tsv`.
+pub fn shared_closed_meshes(root: &Path) -> Option<Vec<PathBuf>> {
+    shared_meshes_where(root, |surface| surface.starts_with("closed"))
+}
+
+fn shared_meshes_where(root: &Path, keep: impl Fn(&str) -> bool) -> Option<Vec<PathBuf>> {
+    let text = std::fs::read_to_string(root.join("MANIFEST.tsv")).ok()?;
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next()?.split('\t').collect();
+    let file = header.iter().position(|h| *h == "file")?;
+    let surface = header.iter().position(|h| *h == "surface")?;
+    Some(
+        lines
+            .map(|l| l.split('\t').collect::<Vec<_>>())
+            .filter(|c| c.len() > file.max(surface) && keep(c[surface]))
+            .map(|c| root.join(c[file]))
+            .collect(),
+    )
+}
+
+/// Shape and flattenability figures of a result, measured from the geometry of the input and
+/// the output only.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Measures {
+    /// ϖ_max of the input.
+    pub varpi_in: f64,
+    /// ϖ_max of the output.
+    pub varpi_out: f64,
+    /// Folds (adjacent normals turning by more than 120°) in the input.
+    pub folds_in: usize,
+    /// Folds in the output.
+    pub folds_out: usize,
+    /// Smallest corner angle of the input, radians.
+    pub min_angle_in: f64,
+    /// Smallest corner angle of the output, radians.
+    pub min_angle_out: f64,
+    /// Two-sided vertex-to-surface distance between output and input over the input's
+    /// bounding-box diagonal.
+    pub hausdorff_relative: f64,
+    /// Largest move of an input vertex over the diagonal.
+    pub max_move_relative: f64,
+}
+
+/// ϖ_max measured by `geometry`.
+pub fn max_flattenability(mesh: &Mesh) -> f64 {
+    let theta = geometry::angle_sums(mesh);
+    geometry::flattenability(mesh, &theta)
+        .into_iter()
+        .fold(0.0, f64::max)
+}
+
+/// Measure `output` against `input` (output keeps input vertex i as vertex i).
+pub fn measure(input: &Mesh, output: &Mesh) -> Measures {
+    let (lo, hi) = input.bbox();
+    let d = sub(hi, lo);
+    let diag = dot(d, d).sqrt().max(f64::MIN_POSITIVE);
+    let min_angle = |m: &Mesh| {
+        geometry::min_corner_angles(m)
+            .into_iter()
+            .fold(PI, f64::min)
+    };
+    let hd = crate::spatial::vertex_surface_hausdorff(
+        output.positions(),
+        output.triangles(),
+        input.positions(),
+        input.triangles(),
+    );
+    let moved = input
+        .positions()
+        .iter()
+        .zip(output.positions())
+        .map(|(a, b)| dot(sub(*a, *b), sub(*a, *b)).sqrt())
+        .fold(0.0, f64::max);
+    Measures {
+        varpi_in: max_flattenability(input),
+        varpi_out: max_flattenability(output),
+        folds_in: geometry::fold_edges(input).len(),
+        folds_out: geometry::fold_edges(output).len(),
+        min_angle_in: min_angle(input),
+        min_angle_out: min_angle(output),
+        hausdorff_relative: hd / diag,
+        max_move_relative: moved / diag,
+    }
+}
