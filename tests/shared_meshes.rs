@@ -103,7 +103,8 @@ fn independent_angle_sums(text: &str) -> (usize, Vec<f64>) {
                 let ok13 = agree(nrm(f[0], f[1], f[3]), nrm(f[1], f[2], f[3]));
                 let ok02 = agree(nrm(f[0], f[1], f[2]), nrm(f[0], f[2], f[3]));
                 let shorter13 = norm(sub(v[f[1]], v[f[3]])) < norm(sub(v[f[0]], v[f[2]]));
-                if (ok13 && (shorter13 || !ok02)) || (!ok02 && !ok13 && shorter13) {
+                let use13 = if ok13 == ok02 { shorter13 } else { ok13 };
+                if use13 {
                     tri(f[0], f[1], f[3]);
                     tri(f[1], f[2], f[3]);
                 } else {
