@@ -94,6 +94,35 @@ fn non_convex_polygons_triangulate_correctly() {
 }
 
 #[test]
+fn quads_split_along_the_diagonal_whose_triangles_agree() {
+    // An arrowhead: the diagonal from the reflex corner (0–2) is the longer one, and the
+    // shorter (1–3) would leave a flipped triangle outside the quad.
+    let text = "v -5 0 0\nv 1 -1 0\nv 0.9 0 0\nv 1 1 0\nf 1 2 3 4\n";
+    let m = load(text);
+    let area: f64 = face_areas(&m).iter().sum();
+    assert!((area - 5.9).abs() < 1e-12, "area {area}");
+    for n in flatmesh::geometry::face_normals(&m) {
+        assert!(n[2] > 0.999, "normal {n:?}");
+    }
+    // A convex non-planar quad goes along its shorter diagonal wherever the face starts.
+    let verts = "v 0 0 0\nv 2 0 0.3\nv 3 2 0\nv 0 1 0.3\n";
+    for face in ["f 1 2 3 4\n", "f 2 3 4 1\n", "f 3 4 1 2\n", "f 4 1 2 3\n"] {
+        let m = load(&format!("{verts}{face}"));
+        let mut diag: Vec<[u32; 2]> = Vec::new();
+        for t in m.triangles() {
+            for k in 0..3 {
+                let (a, b) = (t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3]));
+                if b - a == 2 {
+                    diag.push([a, b]);
+                }
+            }
+        }
+        // |v1 − v3| = √(4 + 1) < |v0 − v2| = √(9 + 4).
+        assert_eq!(diag, vec![[1, 3], [1, 3]], "{face}");
+    }
+}
+
+#[test]
 fn writer_round_trips_exactly() {
     let text = "v 0.1 0.2 0.30000000000000004\nv 1e-300 0 0\nv 1 1 0\nv 0 1 0\n\
                 g a\nf 1 2 3\ng b c\nf 1 3 4\n";

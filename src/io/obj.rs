@@ -8,7 +8,8 @@
 //! Patches: each distinct (`o`, `g`) pair that has faces is one patch, named `g`, `o`, or
 //! `o/g` when both are given; faces before any `o`/`g` go to patch `default`. Polygons are
 //! triangulated by ear clipping in their best-fit plane, so non-convex polygons come out right;
-//! a convex quad is split along its shorter diagonal.
+//! a quad is split along a diagonal whose two triangles face the same way, the shorter when
+//! both (or neither, a twisted quad) do.
 
 use super::ReadError;
 use crate::mesh::{RawMesh, UvLayer, Warning};
@@ -301,14 +302,29 @@ pub fn triangulate_polygon(pts: &[[f64; 3]], out: &mut Vec<[usize; 3]>, s: &mut 
     let cross2 = |a: [f64; 2], b: [f64; 2], c: [f64; 2]| {
         (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
     };
-    // A convex quad is split along its shorter diagonal (in 3D): for a non-planar quad that
-    // is the flatter, more usual choice, and it does not depend on where the face starts.
-    if n == 4 && (0..4).all(|k| cross2(p[(k + 3) % 4], p[k], p[(k + 1) % 4]) > 0.0) {
+    // A quad is split along a diagonal whose two triangles face the same way (a planar
+    // non-convex quad has one); when both do, or neither (a twisted quad, folded in any
+    // split), along the shorter, measured in 3D. The rule does not depend on where the face
+    // starts, and for a non-planar convex quad the shorter diagonal is the flatter split.
+    if n == 4 {
         let d = |a: usize, b: usize| {
             let v = crate::mesh::sub(pts[a], pts[b]);
             crate::mesh::dot(v, v)
         };
-        if d(1, 3) < d(0, 2) {
+        let normal = |a: usize, b: usize, c: usize| {
+            crate::mesh::cross(
+                crate::mesh::sub(pts[b], pts[a]),
+                crate::mesh::sub(pts[c], pts[a]),
+            )
+        };
+        let ok13 = crate::mesh::dot(normal(0, 1, 3), normal(1, 2, 3)) > 0.0;
+        let ok02 = crate::mesh::dot(normal(0, 1, 2), normal(0, 2, 3)) > 0.0;
+        let use13 = if ok13 == ok02 {
+            d(1, 3) < d(0, 2)
+        } else {
+            ok13
+        };
+        if use13 {
             out.push([0, 1, 3]);
             out.push([1, 2, 3]);
         } else {
