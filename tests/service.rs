@@ -689,6 +689,14 @@ async fn every_kind_end_to_end() {
     let varpi = flatmesh::geometry::flattenability(&out, &theta);
     let worst = varpi.iter().cloned().fold(0.0, f64::max);
     assert!(worst <= 1e-7, "downloaded fl-mesh output has ϖ_max {worst}");
+    // The outcome is at the top level of the job, ϖ_max as measured on the download.
+    assert_eq!(done["converged"], true, "{done}");
+    assert!(done["stop_reason"].is_string(), "{done}");
+    let top = done["max_flattenability"].as_f64().unwrap();
+    assert!(
+        (top - worst).abs() <= 1e-15,
+        "job says {top}, download has {worst}"
+    );
     let conn = kmesh.conn();
     let mut moved = 0;
     for v in 0..kmesh.num_vertices() {
@@ -741,6 +749,23 @@ async fn every_kind_end_to_end() {
     assert!(
         worst_rel < 1e-4,
         "pattern of the fl-mesh output: edge error {worst_rel}"
+    );
+
+    // Stopped before converging: the job still succeeds with its best iterate, and says so at
+    // its top level.
+    let j = submit(
+        &c,
+        &s,
+        json!({"kind": "fl-mesh", "mesh_id": km["id"], "params": {"tolerance": 1e-12, "max_iterations": 1, "refine": false}}),
+    )
+    .await;
+    let done = wait_for(&c, &s, j["id"].as_str().unwrap(), &["succeeded", "failed"]).await;
+    assert_eq!(done["status"], "succeeded", "{done}");
+    assert_eq!(done["converged"], false, "{done}");
+    assert_eq!(done["stop_reason"], "max_iterations", "{done}");
+    assert!(
+        done["max_flattenability"].as_f64().unwrap() > 1e-12,
+        "{done}"
     );
 
     // subdivide, one level, with a curve on a rim edge of the cone: level 1 downloadable in
@@ -877,7 +902,7 @@ async fn every_kind_end_to_end() {
         "JobList",
     )
     .await;
-    assert_eq!(all["jobs"].as_array().unwrap().len(), 7);
+    assert_eq!(all["jobs"].as_array().unwrap().len(), 8);
     let fl = json_of(
         c.get(s.url("/v1/jobs?kind=flatten&status=succeeded"))
             .send()

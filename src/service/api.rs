@@ -54,6 +54,7 @@ pub fn job_json(j: &JobRecord, progress: Option<Value>, base: &str) -> Value {
             );
         }
     }
+    let outcome = |k: &str| j.outcome.as_ref().and_then(|o| o.get(k)).cloned();
     json!({
         "id": j.id,
         "kind": j.kind,
@@ -65,6 +66,9 @@ pub fn job_json(j: &JobRecord, progress: Option<Value>, base: &str) -> Value {
         "progress": progress.or_else(|| j.progress.clone()),
         "error": j.error,
         "attempts": j.attempts,
+        "converged": outcome("converged"),
+        "max_flattenability": outcome("max_flattenability"),
+        "stop_reason": outcome("stop_reason"),
         "created_at": rfc3339(j.created_at),
         "started_at": j.started_at.map(rfc3339),
         "finished_at": j.finished_at.map(rfc3339),
@@ -525,6 +529,7 @@ pub async fn submit_job(
         artifacts: vec![],
         idempotency_key: key.clone(),
         request_hash: Some(request_hash.clone()),
+        outcome: None,
     };
     let store = st.store.clone();
     let inserted = blocking(move || {

@@ -243,6 +243,7 @@ impl Executor {
             } else {
                 j.status = Status::Queued;
                 j.progress = None;
+                j.outcome = None;
             }
             self.store.update_job(&j)?;
         }
@@ -328,8 +329,12 @@ impl Executor {
         tracing::info!(job = %id, kind = %job.kind, attempt = job.attempts, "job started");
         let result = catch_unwind(AssertUnwindSafe(|| self.execute(&job, &control)));
         let seconds = start.elapsed().as_secs_f64();
+        let mut reached = None;
         let (status, error, artifacts) = match result {
-            Ok(Ok(artifacts)) => (Status::Succeeded, None, artifacts),
+            Ok(Ok((artifacts, outcome))) => {
+                reached = Some(outcome);
+                (Status::Succeeded, None, artifacts)
+            }
             Ok(Err(ExecError::Algo(AlgoError::Cancelled))) => {
                 if control.timed_out.load(Ordering::Relaxed) {
                     let p = Problem::new(
@@ -389,6 +394,7 @@ impl Executor {
                     job.status = status;
                     job.error = error;
                     job.artifacts = artifacts;
+                    job.outcome = reached;
                     job.progress = live
                         .progress
                         .lock()
@@ -417,8 +423,13 @@ impl Executor {
         self.webhooks.notify(&job);
     }
 
-    /// Load the inputs, run the algorithm, store the artifacts.
-    fn execute(&self, job: &JobRecord, control: &JobControl<'_>) -> Result<Vec<String>, ExecError> {
+    /// Load the inputs, run the algorithm, store the artifacts. Returns their names and what
+    /// the job reached ([`reached`]).
+    fn execute(
+        &self,
+        job: &JobRecord,
+        control: &JobControl<'_>,
+    ) -> Result<(Vec<String>, serde_json::Value), ExecError> {
         let (mesh, warnings) = self.load_mesh(&job.mesh_id, "mesh_id")?;
         let reference = match &job.reference_mesh_id {
             Some(r) => Some(self.load_mesh(r, "reference_mesh_id")?.0),
@@ -442,6 +453,7 @@ impl Executor {
         let out = outcome.mesh.as_ref().unwrap_or(&input.mesh);
         let theta = crate::geometry::angle_sums(out);
         let varpi = crate::geometry::flattenability(out, &theta);
+        let reached = reached(&outcome.summary, &varpi);
         let gltf = io::gltf::write_gltf(out, Some(&varpi));
         self.store
             .put_blob(&format!("jobs/{}/mesh.gltf", job.id), &gltf)
@@ -459,7 +471,7 @@ impl Executor {
                 .map_err(|e| ExecError::Input(e.into()))?;
             names.push(name);
         }
-        Ok(names)
+        Ok((names, reached))
     }
 
     fn load_mesh(
@@ -506,6 +518,25 @@ impl Executor {
         self.store.delete_blobs(&format!("jobs/{id}"))?;
         Ok(existed)
     }
+}
+
+/// The job's top-level outcome: ϖ_max measured on the output mesh (not taken from the
+/// algorithm's own report), and, for iterative kinds, whether it converged and why it stopped
+/// (null for kinds that do not iterate).
+fn reached(
+    summary: &serde_json::Map<String, serde_json::Value>,
+    varpi: &[f64],
+) -> serde_json::Value {
+    let wmax = varpi
+        .iter()
+        .copied()
+        .filter(|w| w.is_finite())
+        .fold(0.0f64, f64::max);
+    serde_json::json!({
+        "converged": summary.get("converged").and_then(|v| v.as_bool()),
+        "max_flattenability": wmax,
+        "stop_reason": summary.get("stop_reason").and_then(|v| v.as_str()),
+    })
 }
 
 enum ExecError {
@@ -588,6 +619,7 @@ mod tests {
             artifacts: vec![],
             idempotency_key: None,
             request_hash: None,
+            outcome: None,
         }
     }
 
@@ -604,6 +636,30 @@ mod tests {
             );
             std::thread::sleep(Duration::from_millis(10));
         }
+    }
+
+    /// A store written before jobs had an outcome opens, keeps its jobs, and records outcomes.
+    #[test]
+    fn store_without_outcome_column_is_upgraded() {
+        let dir = std::env::temp_dir().join(format!("flatmesh-old-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        {
+            let store = SqliteStore::open(&dir).unwrap();
+            store.insert_job(&job("j_old", "m1", false)).unwrap();
+        }
+        {
+            let c = rusqlite::Connection::open(dir.join("flatmesh.sqlite3")).unwrap();
+            c.execute_batch("ALTER TABLE jobs DROP COLUMN outcome")
+                .unwrap();
+        }
+        let store = SqliteStore::open(&dir).unwrap();
+        let mut j = store.get_job("j_old").unwrap().unwrap();
+        assert_eq!(j.outcome, None);
+        j.outcome = Some(serde_json::json!({"converged": true}));
+        store.update_job(&j).unwrap();
+        assert_eq!(store.get_job("j_old").unwrap().unwrap().outcome, j.outcome);
+        drop(store);
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     /// A panic inside an algorithm fails that job with a 500 problem; the pool keeps working.

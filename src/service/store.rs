@@ -119,6 +119,9 @@ pub struct JobRecord {
     pub attempts: u32,
     /// Names of the stored artifacts (`report.json`, `mesh.glb`, …), blobs `jobs/{id}/{name}`.
     pub artifacts: Vec<String>,
+    /// What a succeeded job reached, shown at the top level of the job: `converged`,
+    /// `max_flattenability` (measured on the output), `stop_reason`.
+    pub outcome: Option<serde_json::Value>,
     /// Client's `Idempotency-Key`.
     pub idempotency_key: Option<String>,
     /// Hash of the request that created the job (to detect a reused key).
@@ -235,7 +238,8 @@ CREATE TABLE IF NOT EXISTS jobs (
   attempts INTEGER NOT NULL DEFAULT 0,
   artifacts TEXT NOT NULL DEFAULT '[]',
   idempotency_key TEXT UNIQUE,
-  request_hash TEXT
+  request_hash TEXT,
+  outcome TEXT
 );
 CREATE INDEX IF NOT EXISTS jobs_status ON jobs(status, seq);
 CREATE INDEX IF NOT EXISTS jobs_mesh ON jobs(mesh_id);
@@ -244,7 +248,7 @@ CREATE INDEX IF NOT EXISTS jobs_ref ON jobs(reference_mesh_id);
 
 const JOB_COLS: &str = "seq, id, kind, mesh_id, reference_mesh_id, params, callback_url, status, \
     progress, error, created_at, started_at, finished_at, expires_at, attempts, artifacts, \
-    idempotency_key, request_hash";
+    idempotency_key, request_hash, outcome";
 
 fn json_err(e: serde_json::Error) -> rusqlite::Error {
     rusqlite::Error::ToSqlConversionFailure(Box::new(e))
@@ -263,6 +267,7 @@ fn job_from_row(r: &rusqlite::Row<'_>) -> rusqlite::Result<JobRecord> {
     let progress: Option<String> = r.get(8)?;
     let error: Option<String> = r.get(9)?;
     let artifacts: String = r.get(15)?;
+    let outcome: Option<String> = r.get(18)?;
     Ok(JobRecord {
         seq: r.get(0)?,
         id: r.get(1)?,
@@ -288,7 +293,22 @@ fn job_from_row(r: &rusqlite::Row<'_>) -> rusqlite::Result<JobRecord> {
         artifacts: serde_json::from_str(&artifacts).map_err(|e| bad(15, e.to_string()))?,
         idempotency_key: r.get(16)?,
         request_hash: r.get(17)?,
+        outcome: outcome
+            .map(|p| serde_json::from_str(&p))
+            .transpose()
+            .map_err(|e| bad(18, e.to_string()))?,
     })
+}
+
+/// Stores made before jobs had an outcome get the column (empty for their jobs).
+fn add_outcome_column(conn: &Connection) -> rusqlite::Result<()> {
+    let has: bool = conn
+        .prepare("SELECT 1 FROM pragma_table_info('jobs') WHERE name = 'outcome'")?
+        .exists([])?;
+    if !has {
+        conn.execute_batch("ALTER TABLE jobs ADD COLUMN outcome TEXT")?;
+    }
+    Ok(())
 }
 
 impl SqliteStore {
@@ -303,6 +323,7 @@ impl SqliteStore {
         conn.pragma_update(None, "synchronous", "NORMAL")?;
         conn.busy_timeout(std::time::Duration::from_secs(5))?;
         conn.execute_batch(SCHEMA)?;
+        add_outcome_column(&conn)?;
         // No automatic checkpoint inside a commit (it fsyncs, ~10-40 ms on a busy disk);
         // `maintain` checkpoints from its own connection instead.
         conn.pragma_update(None, "wal_autocheckpoint", 0)?;
@@ -468,7 +489,8 @@ impl Store for SqliteStore {
         tx.execute(
             "INSERT INTO jobs (id, kind, mesh_id, reference_mesh_id, params, callback_url, status, \
              progress, error, created_at, started_at, finished_at, expires_at, attempts, artifacts, \
-             idempotency_key, request_hash) VALUES (?1,?2,?3,?4,?5,?6,?7,?8,?9,?10,?11,?12,?13,?14,?15,?16,?17)",
+             idempotency_key, request_hash, outcome) \
+             VALUES (?1,?2,?3,?4,?5,?6,?7,?8,?9,?10,?11,?12,?13,?14,?15,?16,?17,?18)",
             params![
                 j.id,
                 j.kind,
@@ -487,6 +509,7 @@ impl Store for SqliteStore {
                 serde_json::to_string(&j.artifacts).map_err(json_err)?,
                 j.idempotency_key,
                 j.request_hash,
+                j.outcome.as_ref().map(|p| p.to_string()),
             ],
         )?;
         let seq = tx.last_insert_rowid();
@@ -511,7 +534,7 @@ impl Store for SqliteStore {
     fn update_job(&self, j: &JobRecord) -> Result<(), StoreError> {
         self.conn().execute(
             "UPDATE jobs SET status=?2, progress=?3, error=?4, started_at=?5, finished_at=?6, \
-             expires_at=?7, attempts=?8, artifacts=?9 WHERE id=?1",
+             expires_at=?7, attempts=?8, artifacts=?9, outcome=?10 WHERE id=?1",
             params![
                 j.id,
                 j.status.as_str(),
@@ -526,6 +549,7 @@ impl Store for SqliteStore {
                 j.expires_at,
                 j.attempts,
                 serde_json::to_string(&j.artifacts).map_err(json_err)?,
+                j.outcome.as_ref().map(|p| p.to_string()),
             ],
         )?;
         Ok(())
