@@ -184,16 +184,7 @@ fn subdivide_panels(mesh: &Mesh, target: usize) -> Mesh {
 
 fn noisy(mesh: &Mesh, sigma_edges: f64) -> Mesh {
     let p = mesh.positions();
-    let e = mesh.conn().edges();
-    let h = e
-        .iter()
-        .map(|e| {
-            let a = p[e[0] as usize];
-            let b = p[e[1] as usize];
-            ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
-        })
-        .sum::<f64>()
-        / e.len() as f64;
+    let h = geometry::mean_edge_length(mesh);
     let n = geometry::vertex_normals(mesh);
     let mut s = 0x9e3779b97f4a7c15u64;
     let mut pos = p.to_vec();

@@ -138,7 +138,7 @@ pub fn procedural() -> Vec<Procedural> {
 /// Move every interior vertex along its normal by a normal random amount of standard deviation
 /// `sigma` mean edge lengths (fixed seed); other vertices stay bit-identical.
 pub fn with_normal_noise(mesh: &Mesh, sigma: f64, seed: u64) -> Mesh {
-    let h = mean_edge_length(mesh);
+    let h = geometry::mean_edge_length(mesh);
     let normals = geometry::vertex_normals(mesh);
     let mut rng = SplitMix(seed);
     let mut pos = mesh.positions().to_vec();
@@ -150,20 +150,6 @@ pub fn with_normal_noise(mesh: &Mesh, sigma: f64, seed: u64) -> Mesh {
     }
     mesh.with_positions(pos)
         .expect("noise keeps the mesh valid")
-}
-
-/// Mean edge length.
-pub fn mean_edge_length(mesh: &Mesh) -> f64 {
-    let e = mesh.conn().edges();
-    let p = mesh.positions();
-    let sum: f64 = e
-        .iter()
-        .map(|e| {
-            let d = sub(p[e[0] as usize], p[e[1] as usize]);
-            dot(d, d).sqrt()
-        })
-        .sum();
-    sum / e.len().max(1) as f64
 }
 
 /// Where the shared meshes live, relative to the crate root.
@@ -257,5 +243,143 @@ pub fn measure(input: &Mesh, output: &Mesh) -> Measures {
         min_angle_out: min_angle(output),
         hausdorff_relative: hd / diag,
         max_move_relative: moved / diag,
+    }
+}
+
+/// A case of the corpus: its name and how to make its mesh.
+pub struct Case {
+    /// File stem of a shared mesh, `fixture-NAME`, or a procedural name.
+    pub name: String,
+    load: Box<dyn Fn() -> Result<Mesh, String>>,
+}
+
+impl Case {
+    /// The mesh, or why the reader refused it.
+    pub fn mesh(&self) -> Result<Mesh, String> {
+        (self.load)()
+    }
+}
+
+/// Every case: with `shared`, the open then the closed meshes of `root` (when its manifest is
+/// there), then the fixtures, then [`procedural`].
+pub fn cases(root: &Path, shared: bool) -> Vec<Case> {
+    let mut out = Vec::new();
+    if shared {
+        let open = shared_open_meshes(root).unwrap_or_default();
+        let closed = shared_closed_meshes(root).unwrap_or_default();
+        for p in open.into_iter().chain(closed) {
+            out.push(Case {
+                name: p.file_stem().unwrap_or_default().to_string_lossy().into(),
+                load: Box::new(move || {
+                    crate::io::load_path(&p)
+                        .map(|(m, _)| m)
+                        .map_err(|e| format!("{}: {e}", p.display()))
+                }),
+            });
+        }
+    }
+    for f in crate::fixtures::all() {
+        out.push(Case {
+            name: format!("fixture-{}", f.name),
+            load: Box::new(move || {
+                Mesh::new(f.mesh.clone())
+                    .map(|m| m.0)
+                    .map_err(|e| e.to_string())
+            }),
+        });
+    }
+    for p in procedural() {
+        out.push(Case {
+            name: p.name(),
+            load: Box::new(move || Ok(p.mesh())),
+        });
+    }
+    out
+}
+
+/// One fl-mesh run on one case: the solver's iteration count and stop reason, and everything
+/// else measured from the geometry.
+#[derive(Debug, Clone)]
+pub struct Row {
+    /// Case name.
+    pub name: String,
+    /// Faces of the input.
+    pub faces: usize,
+    /// Iterations taken.
+    pub iterations: usize,
+    /// Measured ϖ_max(out) ≤ tolerance.
+    pub converged: bool,
+    /// The solver's stop reason.
+    pub stop_reason: String,
+    /// Geometry-only figures.
+    pub measures: Measures,
+    /// Wall-clock seconds of the run.
+    pub seconds: f64,
+}
+
+/// Run fl-mesh on `mesh` and measure the result.
+pub fn run_fl_mesh(
+    name: &str,
+    mesh: &Mesh,
+    params: &crate::algorithms::fl_mesh::Params,
+) -> Result<Row, crate::algorithms::AlgoError> {
+    let t = std::time::Instant::now();
+    let (out, report) =
+        crate::algorithms::fl_mesh::solve(mesh, params, &crate::algorithms::Silent::default())?;
+    let seconds = t.elapsed().as_secs_f64();
+    let measures = measure(mesh, &out);
+    Ok(Row {
+        name: name.into(),
+        faces: mesh.num_faces(),
+        iterations: report.iterations,
+        converged: measures.varpi_out <= params.tolerance,
+        stop_reason: report.stop_reason,
+        measures,
+        seconds,
+    })
+}
+
+impl Row {
+    /// Column titles for [`Row`]'s `Display`.
+    pub fn header() -> String {
+        format!(
+            "{:<28} {:>6} {:>4} {:>9} {:>9} {:>5} {:>5} {:>6} {:>6} {:>7} {:>7} {:>6}  stop",
+            "mesh",
+            "faces",
+            "its",
+            "ϖ in",
+            "ϖ out",
+            "f.in",
+            "f.out",
+            "∠in°",
+            "∠out°",
+            "hd%",
+            "move%",
+            "s"
+        )
+    }
+}
+
+impl std::fmt::Display for Row {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let x = &self.measures;
+        write!(
+            f,
+            "{:<28} {:>6} {:>4} {:>9.2e} {:>9.2e} {:>5} {:>5} {:>6.2} {:>6.2} {:>7.3} {:>7.3} {:>6.2}  {}{}",
+            self.name,
+            self.faces,
+            self.iterations,
+            x.varpi_in,
+            x.varpi_out,
+            x.folds_in,
+            x.folds_out,
+            x.min_angle_in.to_degrees(),
+            x.min_angle_out.to_degrees(),
+            100.0 * x.hausdorff_relative,
+            100.0 * x.max_move_relative,
+            self.seconds,
+            self.stop_reason,
+            if self.converged { "" } else { " [NOT CONVERGED]" }
+        )
     }
 }

@@ -49,8 +49,9 @@ enum Command {
     /// anchor=input|closest (input), until=flattenable|stationary (flattenable), tolerance
     /// (1e-6 rad), step_tolerance (1e-5), max_iterations (200), refine=true|false (true),
     /// max_refinements (3), stall_iterations (16), linear_solver=ldlt|lu (ldlt),
-    /// shape_guard=true|false (false), min_angle (2 degrees). The best iterate is written
-    /// (never worse than the input in ϖ_max); when it is not flattenable the exit status is 3.
+    /// shape_guard=true|false (false), fold_penalty (0: off), min_angle (2 degrees). The best
+    /// iterate is written (never worse than the input in ϖ_max); when it is not flattenable
+    /// the exit status is 3.
     ///
     /// subdivide (Sec. 3 of Wang's FL meshes) also writes level_<k>.glb and level_<k>.obj for
     /// every level; parameters: levels (1; or --levels), curves (or --curves), split_ratio

@@ -190,7 +190,7 @@ proptest! {
     ) {
         let base = Procedural { family: fam, faces, noise: 0.0 }.mesh();
         let mesh = corpus::with_normal_noise(&base, noise, seed);
-        let h = corpus::mean_edge_length(&mesh);
+        let h = flatmesh::geometry::mean_edge_length(&mesh);
         let interior: Vec<u32> = mesh.conn().interior_vertices().collect();
         prop_assume!(!interior.is_empty());
         let normals = flatmesh::geometry::vertex_normals(&mesh);

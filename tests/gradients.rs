@@ -180,3 +180,43 @@ fn gradients_on_noisy_grid() {
         "6x6 interior vertices, each with 6 neighbours plus itself"
     );
 }
+
+/// The turning-angle gradient against central differences, on random hinges bent both ways
+/// (folds included).
+#[test]
+fn turning_angle_gradient_matches_finite_differences() {
+    let mut s = 0x2545f4914f6cdd1du64;
+    let mut rnd = || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    };
+    let mut checked = 0;
+    for _ in 0..200 {
+        let p: Vec<[f64; 3]> = (0..4).map(|_| [rnd(), rnd(), rnd()]).collect();
+        let (phi, g) = flatmesh::geometry::turning_angle_gradient(p[0], p[1], p[2], p[3]);
+        if !(0.05..std::f64::consts::PI - 0.05).contains(&phi) {
+            continue;
+        }
+        for v in 0..4 {
+            for c in 0..3 {
+                let h = 1e-6;
+                let mut q = p.clone();
+                q[v][c] += h;
+                let up = flatmesh::geometry::turning_angle_gradient(q[0], q[1], q[2], q[3]).0;
+                q[v][c] -= 2.0 * h;
+                let dn = flatmesh::geometry::turning_angle_gradient(q[0], q[1], q[2], q[3]).0;
+                let fd = (up - dn) / (2.0 * h);
+                let scale = 1.0 + norm(g[v]);
+                assert!(
+                    (fd - g[v][c]).abs() <= 1e-5 * scale,
+                    "vertex {v} coord {c}: analytic {} fd {fd} (φ = {phi})",
+                    g[v][c]
+                );
+            }
+        }
+        checked += 1;
+    }
+    assert!(checked > 100, "only {checked} hinges checked");
+}

@@ -298,3 +298,51 @@ pub fn min_corner_angles(mesh: &Mesh) -> Vec<f64> {
         .map(|a| a[0].min(a[1]).min(a[2]))
         .collect()
 }
+
+/// Mean edge length (0 for a mesh without edges): the length scale of a mesh.
+pub fn mean_edge_length(mesh: &Mesh) -> f64 {
+    let e = mesh.conn().edges();
+    if e.is_empty() {
+        return 0.0;
+    }
+    let p = mesh.positions();
+    e.iter()
+        .map(|e| {
+            let d = sub(p[e[0] as usize], p[e[1] as usize]);
+            dot(d, d).sqrt()
+        })
+        .sum::<f64>()
+        / e.len() as f64
+}
+
+/// Turning angle φ ∈ [0, π] between the normals of triangles (i, j, k) and (j, i, l) across
+/// their shared edge i–j (0 when flat, [`FOLD_ANGLE`] and above a fold), and its gradient with
+/// respect to p_i, p_j, p_k, p_l (the hinge formulas of Bridson et al. 2003, signed by the
+/// direction the hinge bends). Zero gradient when a triangle is degenerate or φ is 0 or π,
+/// where φ is not differentiable.
+pub fn turning_angle_gradient(
+    pi: [f64; 3],
+    pj: [f64; 3],
+    pk: [f64; 3],
+    pl: [f64; 3],
+) -> (f64, [[f64; 3]; 4]) {
+    let e = sub(pj, pi);
+    let n1 = cross(e, sub(pk, pi));
+    let n2 = cross(sub(pl, pj), e);
+    let (a1, a2, le) = (dot(n1, n1), dot(n2, n2), dot(e, e).sqrt());
+    let sin = dot(e, cross(n1, n2)) / le;
+    let cos = dot(n1, n2);
+    let signed = sin.atan2(cos);
+    let phi = signed.abs();
+    if !(a1 > 0.0 && a2 > 0.0 && le > 0.0) || phi == 0.0 || !phi.is_finite() {
+        return (if phi.is_finite() { phi } else { 0.0 }, [[0.0; 3]; 4]);
+    }
+    let s = -signed.signum();
+    let u1 = n1.map(|x| s * le * x / a1);
+    let u2 = n2.map(|x| s * le * x / a2);
+    let (d1i, d1j) = (dot(sub(pk, pi), e) / le, dot(sub(pk, pj), e) / le);
+    let (d2i, d2j) = (dot(sub(pl, pi), e) / le, dot(sub(pl, pj), e) / le);
+    let ui = [0, 1, 2].map(|c| s * (d1j * n1[c] / a1 + d2j * n2[c] / a2));
+    let uj = [0, 1, 2].map(|c| -s * (d1i * n1[c] / a1 + d2i * n2[c] / a2));
+    (phi, [ui, uj, u1, u2])
+}
