@@ -47,9 +47,10 @@ enum Command {
     ///
     /// fl-mesh parameters: w1 (1), w2 (0.1), tau (0.25), step_rule=merit|fixed|lm (merit),
     /// anchor=input|closest (input), until=flattenable|stationary (flattenable), tolerance
-    /// (1e-6 rad), step_tolerance (1e-5), max_iterations (200), refine=true|false (true),
-    /// max_refinements (3), stall_iterations (16), linear_solver=ldlt|lu (ldlt),
-    /// shape_guard=true|false (false), fold_penalty (0: off), min_angle (2 degrees). The best
+    /// (1e-6 rad), step_tolerance (1e-5), max_iterations (600), refine=true|false (true),
+    /// max_refinements (3), stall_iterations (40), linear_solver=ldlt|lu (ldlt),
+    /// shape_guard=true|false (false), shape_penalty (1; 0: the paper's model), min_angle (2
+    /// degrees). The best
     /// iterate is written (never worse than the input in ϖ_max); when it is not flattenable
     /// the exit status is 3.
     ///

@@ -208,3 +208,39 @@ proptest! {
         check_never_worse("random", &mesh, &params);
     }
 }
+
+/// The shape penalty (default κ = 1) against the paper's model (κ = 0) on two real garments
+/// that the paper's model converges on by creasing: both runs converge, and the penalised one
+/// leaves at most half as many new folds (measured: t-shirt 81 → 25, shirt front 25 → 0).
+#[test]
+fn shape_penalty_halves_new_folds_on_garments() {
+    let Some(root) = shared_root() else { return };
+    for rel in [
+        "garment/diffavatar_tshirt.obj",
+        "garment/gf_shirtfront00041.obj",
+    ] {
+        let (mesh, _) = flatmesh::io::load_path(&root.join(rel)).expect("loads");
+        let folds_in = flatmesh::geometry::fold_edges(&mesh).len();
+        let mut new_folds = Vec::new();
+        for kappa in [0.0, 1.0] {
+            let params = Params {
+                shape_penalty: kappa,
+                ..Params::default()
+            };
+            let (out, _) = fl_mesh::solve(&mesh, &params, &Silent::default()).expect("runs");
+            let m = corpus::measure(&mesh, &out);
+            assert!(
+                m.varpi_out <= 1e-6,
+                "{rel} κ = {kappa}: ϖ_max {:e}",
+                m.varpi_out
+            );
+            new_folds.push(m.folds_out.saturating_sub(folds_in));
+        }
+        assert!(
+            2 * new_folds[1] <= new_folds[0],
+            "{rel}: new folds {} with the penalty, {} without",
+            new_folds[1],
+            new_folds[0]
+        );
+    }
+}

@@ -469,13 +469,7 @@ fn check_faces(positions: &[[f64; 3]], triangles: &[[u32; 3]]) -> Result<(), Mes
             positions[t[1] as usize],
             positions[t[2] as usize],
         ];
-        let e0 = sub(b, a);
-        let e1 = sub(c, b);
-        let e2 = sub(a, c);
-        let cr = cross(e0, sub(c, a));
-        let area2 = dot(cr, cr).sqrt();
-        let lmax2 = dot(e0, e0).max(dot(e1, e1)).max(dot(e2, e2));
-        if area2 <= DEGENERATE_REL_AREA * lmax2 || !area2.is_finite() {
+        if is_degenerate_triangle(a, b, c) {
             return Err(MeshError::DegenerateFace {
                 face: f,
                 vertices: *t,
@@ -484,6 +478,19 @@ fn check_faces(positions: &[[f64; 3]], triangles: &[[u32; 3]]) -> Result<(), Mes
         }
     }
     Ok(())
+}
+
+/// Whether a triangle counts as zero-area: twice its area at most [`DEGENERATE_REL_AREA`]
+/// times its longest edge squared (a sliver, whatever its size), or not finite. The one test
+/// shared by validation and by the optimisers, so an iterate they accept always validates.
+pub fn is_degenerate_triangle(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> bool {
+    let e0 = sub(b, a);
+    let e1 = sub(c, b);
+    let e2 = sub(a, c);
+    let cr = cross(e0, sub(c, a));
+    let area2 = dot(cr, cr).sqrt();
+    let lmax2 = dot(e0, e0).max(dot(e1, e1)).max(dot(e2, e2));
+    area2 <= DEGENERATE_REL_AREA * lmax2 || !area2.is_finite()
 }
 
 #[inline]
