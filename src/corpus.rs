@@ -193,6 +193,11 @@ pub struct Measures {
     pub folds_in: usize,
     /// Folds in the output.
     pub folds_out: usize,
+    /// Creases (adjacent normals turning by more than 60°) in the input.
+    pub creases_in: usize,
+    /// Creases in the output: folds count only the near-fold-overs; this shows how crumpled
+    /// the surface got short of that.
+    pub creases_out: usize,
     /// Smallest corner angle of the input, radians.
     pub min_angle_in: f64,
     /// Smallest corner angle of the output, radians.
@@ -210,6 +215,18 @@ pub fn max_flattenability(mesh: &Mesh) -> f64 {
     geometry::flattenability(mesh, &theta)
         .into_iter()
         .fold(0.0, f64::max)
+}
+
+/// Edges whose adjacent unit normals turn by more than 60°.
+fn creases(mesh: &Mesh) -> usize {
+    let n = geometry::face_normals(mesh);
+    let limit = (PI / 3.0).cos();
+    mesh.conn()
+        .edge_faces()
+        .iter()
+        .filter(|f| f[1] != crate::mesh::NONE)
+        .filter(|f| dot(n[f[0] as usize], n[f[1] as usize]) < limit)
+        .count()
 }
 
 /// Measure `output` against `input` (output keeps input vertex i as vertex i).
@@ -239,6 +256,8 @@ pub fn measure(input: &Mesh, output: &Mesh) -> Measures {
         varpi_out: max_flattenability(output),
         folds_in: geometry::fold_edges(input).len(),
         folds_out: geometry::fold_edges(output).len(),
+        creases_in: creases(input),
+        creases_out: creases(output),
         min_angle_in: min_angle(input),
         min_angle_out: min_angle(output),
         hausdorff_relative: hd / diag,
@@ -343,7 +362,7 @@ impl Row {
     /// Column titles for [`Row`]'s `Display`.
     pub fn header() -> String {
         format!(
-            "{:<28} {:>6} {:>4} {:>9} {:>9} {:>5} {:>5} {:>6} {:>6} {:>7} {:>7} {:>6}  stop",
+            "{:<28} {:>6} {:>4} {:>9} {:>9} {:>5} {:>5} {:>5} {:>5} {:>6} {:>6} {:>7} {:>7} {:>6}  stop",
             "mesh",
             "faces",
             "its",
@@ -351,6 +370,8 @@ impl Row {
             "ϖ out",
             "f.in",
             "f.out",
+            "c.in",
+            "c.out",
             "∠in°",
             "∠out°",
             "hd%",
@@ -365,7 +386,7 @@ impl std::fmt::Display for Row {
         let x = &self.measures;
         write!(
             f,
-            "{:<28} {:>6} {:>4} {:>9.2e} {:>9.2e} {:>5} {:>5} {:>6.2} {:>6.2} {:>7.3} {:>7.3} {:>6.2}  {}{}",
+            "{:<28} {:>6} {:>4} {:>9.2e} {:>9.2e} {:>5} {:>5} {:>5} {:>5} {:>6.2} {:>6.2} {:>7.3} {:>7.3} {:>6.2}  {}{}",
             self.name,
             self.faces,
             self.iterations,
@@ -373,6 +394,8 @@ impl std::fmt::Display for Row {
             x.varpi_out,
             x.folds_in,
             x.folds_out,
+            x.creases_in,
+            x.creases_out,
             x.min_angle_in.to_degrees(),
             x.min_angle_out.to_degrees(),
             100.0 * x.hausdorff_relative,
