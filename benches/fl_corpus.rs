@@ -20,27 +20,12 @@ fn table() {
         return;
     }
     let filter = std::env::var("FL_CORPUS_FILTER").unwrap_or_default();
-    let params = Params::default();
-    println!("{}", corpus::Row::header());
-    let (mut total, mut conv) = (0, 0);
-    for case in corpus::cases(Path::new(corpus::SHARED_MESHES), true) {
-        if !case.name.contains(&filter) {
-            continue;
-        }
-        let Ok(mesh) = case.mesh() else {
-            println!("{:<28} refused by the reader", case.name);
-            continue;
-        };
-        match corpus::run_fl_mesh(&case.name, &mesh, &params) {
-            Ok(row) => {
-                total += 1;
-                conv += usize::from(row.converged);
-                println!("{row}");
-            }
-            Err(e) => println!("{:<28} error: {e}", case.name),
-        }
-    }
-    println!("{conv} of {total} reached ϖ_max ≤ {:e}", params.tolerance);
+    corpus::print_table(
+        Path::new(corpus::SHARED_MESHES),
+        true,
+        &filter,
+        &Params::default(),
+    );
 }
 
 fn bench(c: &mut Criterion) {

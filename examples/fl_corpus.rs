@@ -28,27 +28,5 @@ fn main() {
         }
     }
     let params: fl_mesh::Params = parse_params(&params).expect("parameters");
-    println!("{}", corpus::Row::header());
-    let (mut total, mut conv) = (0, 0);
-    for case in corpus::cases(Path::new(corpus::SHARED_MESHES), shared) {
-        if !case.name.contains(&filter) {
-            continue;
-        }
-        let mesh = match case.mesh() {
-            Ok(m) => m,
-            Err(e) => {
-                println!("{:<28} refused by the reader: {e}", case.name);
-                continue;
-            }
-        };
-        match corpus::run_fl_mesh(&case.name, &mesh, &params) {
-            Ok(row) => {
-                total += 1;
-                conv += usize::from(row.converged);
-                println!("{row}");
-            }
-            Err(e) => println!("{:<28} error: {e}", case.name),
-        }
-    }
-    println!("{conv} of {total} reached ϖ_max ≤ {:e}", params.tolerance);
+    corpus::print_table(Path::new(corpus::SHARED_MESHES), shared, &filter, &params);
 }

@@ -406,3 +406,37 @@ impl std::fmt::Display for Row {
         )
     }
 }
+
+/// Run fl-mesh on every case (of [`cases`]) whose name contains `filter` and print the table:
+/// [`Row::header`], one row per case (or why the reader refused it), then the count that
+/// converged.
+pub fn print_table(
+    root: &Path,
+    shared: bool,
+    filter: &str,
+    params: &crate::algorithms::fl_mesh::Params,
+) {
+    println!("{}", Row::header());
+    let (mut total, mut conv) = (0, 0);
+    for case in cases(root, shared) {
+        if !case.name.contains(filter) {
+            continue;
+        }
+        let mesh = match case.mesh() {
+            Ok(m) => m,
+            Err(e) => {
+                println!("{:<28} refused by the reader: {e}", case.name);
+                continue;
+            }
+        };
+        match run_fl_mesh(&case.name, &mesh, params) {
+            Ok(row) => {
+                total += 1;
+                conv += usize::from(row.converged);
+                println!("{row}");
+            }
+            Err(e) => println!("{:<28} error: {e}", case.name),
+        }
+    }
+    println!("{conv} of {total} reached ϖ_max ≤ {:e}", params.tolerance);
+}
