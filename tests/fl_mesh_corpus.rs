@@ -256,10 +256,21 @@ fn a_stalled_penalised_run_falls_back_to_the_papers_model() {
         noise: 0.1,
     }
     .mesh();
-    let (out, r) = fl_mesh::solve(&mesh, &Params::default(), &Silent::default()).expect("runs");
+    let stages = Stages::default();
+    let (out, r) = fl_mesh::solve(&mesh, &Params::default(), &stages).expect("runs");
     let m = corpus::measure(&mesh, &out);
     assert!(m.varpi_out <= 1e-6, "ϖ_max {:e}", m.varpi_out);
     assert!(r.converged);
+    // Progress names the second run's stage, whose iterations count from 1 again.
+    let seen = stages.0.lock().unwrap();
+    let k = seen
+        .iter()
+        .position(|(s, _)| s == "newton, no shape penalty")
+        .expect("the second run reports its own stage");
+    assert_eq!(seen[k].1, 1);
+    assert!(seen[..k]
+        .iter()
+        .all(|(s, _)| !s.contains("no shape penalty")));
     assert!(
         r.stop_reason.contains("without it, from the input"),
         "{}",
@@ -277,4 +288,17 @@ fn a_stalled_penalised_run_falls_back_to_the_papers_model() {
         "best {} restart {restart}",
         r.best_iteration
     );
+}
+
+/// Records every progress report's stage and iteration.
+#[derive(Default)]
+struct Stages(std::sync::Mutex<Vec<(String, usize)>>);
+
+impl flatmesh::algorithms::Control for Stages {
+    fn progress(&self, p: &flatmesh::algorithms::Progress) {
+        self.0.lock().unwrap().push((p.stage.clone(), p.iteration));
+    }
+    fn cancelled(&self) -> bool {
+        false
+    }
 }

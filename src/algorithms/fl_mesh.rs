@@ -402,7 +402,7 @@ pub fn solve(
         max_iterations: remaining,
         ..params.clone()
     };
-    let (out2, second) = solve_phase(mesh, &plain, control)?;
+    let (out2, second) = solve_phase(mesh, &plain, &Renamed(control))?;
     let offset = first.iterations;
     if second.converged {
         let mut history = first.history;
@@ -433,6 +433,22 @@ pub fn solve(
         );
         report.iterations += second.iterations;
         Ok((out, report))
+    }
+}
+
+/// Progress of the second run of [`solve`] under its own stage names (`newton, no shape
+/// penalty`, …), so that a client sees its iterations restart with a new stage.
+struct Renamed<'a>(&'a dyn Control);
+
+impl Control for Renamed<'_> {
+    fn progress(&self, p: &Progress) {
+        self.0.progress(&Progress {
+            stage: format!("{}, no shape penalty", p.stage),
+            ..p.clone()
+        });
+    }
+    fn cancelled(&self) -> bool {
+        self.0.cancelled()
     }
 }
 
