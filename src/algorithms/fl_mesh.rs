@@ -476,14 +476,13 @@ fn solve_phase(
     let mut best: Option<(f64, Mesh, usize, usize, f64, usize)> = None;
     loop {
         let mut sys = System::new(&current, &impossible, params)?;
-        let end = sys.iterate(
-            &current,
-            &mut anchors,
-            input_grid.as_ref(),
+        let round = Round {
+            mesh: &current,
+            grid: input_grid.as_ref(),
             params,
             control,
-            &mut report,
-        )?;
+        };
+        let end = sys.iterate(&round, &mut anchors, &mut report)?;
         // Accepted iterates pass the validator's own degeneracy test (trial_valid), so this
         // cannot fail; if it ever did, the best valid mesh so far is returned.
         current = match current.with_positions(sys.pos.clone()) {
@@ -653,6 +652,16 @@ fn impossible_vertices(mesh: &Mesh) -> Vec<bool> {
 enum End {
     Done(String),
     Stalled(Vec<u32>),
+}
+
+/// What one refinement round's iterations read: the mesh (its connectivity), the input
+/// surface for `anchor = closest`, the parameters and the caller's control.
+#[derive(Clone, Copy)]
+struct Round<'a> {
+    mesh: &'a Mesh,
+    grid: Option<&'a crate::spatial::TriangleGrid>,
+    params: &'a Params,
+    control: &'a dyn Control,
 }
 
 /// The KKT system of one mesh (fixed connectivity): pattern, symbolic LU, work arrays.
@@ -826,7 +835,7 @@ impl System {
         let (active_faces, floor, guarded_edges) = shape_guard(mesh, &row, params);
         let h_base = values[..h_pairs.len()].to_vec();
         let (hinges, corners) = if params.shape_penalty > 0.0 {
-            (hinges(mesh, &row), corners(mesh, &row))
+            (hinges(mesh, &row), corners(mesh, &active_faces))
         } else {
             (Vec::new(), Vec::new())
         };
@@ -872,23 +881,19 @@ impl System {
 
     /// Newton iterations on the current connectivity. Leaves the best iterate of the round (by
     /// ϖ_max, the latest among flattenable ones) in `pos`, `theta` and `grad`.
-    #[allow(clippy::too_many_arguments)]
     fn iterate(
         &mut self,
-        mesh: &Mesh,
+        round: &Round<'_>,
         anchors: &mut [[f64; 3]],
-        grid: Option<&crate::spatial::TriangleGrid>,
-        params: &Params,
-        control: &dyn Control,
         report: &mut Report,
     ) -> Result<End, AlgoError> {
-        let end = self.iterate_inner(mesh, anchors, grid, params, control, report);
+        let end = self.iterate_inner(round, anchors, report);
         if self.best_wmax < violation(&self.theta).0 {
             std::mem::swap(&mut self.pos, &mut self.best_pos);
             eval(
                 &self.pos,
-                mesh.triangles(),
-                mesh.conn(),
+                round.mesh.triangles(),
+                round.mesh.conn(),
                 &self.free,
                 &self.slot_start,
                 &mut self.theta,
@@ -898,16 +903,18 @@ impl System {
         end
     }
 
-    #[allow(clippy::too_many_arguments)]
     fn iterate_inner(
         &mut self,
-        mesh: &Mesh,
+        round: &Round<'_>,
         anchors: &mut [[f64; 3]],
-        grid: Option<&crate::spatial::TriangleGrid>,
-        params: &Params,
-        control: &dyn Control,
         report: &mut Report,
     ) -> Result<End, AlgoError> {
+        let Round {
+            mesh,
+            grid,
+            params,
+            control,
+        } = *round;
         let tris = mesh.triangles();
         let conn = mesh.conn();
         let n = self.n;
@@ -1687,12 +1694,13 @@ const FOLD_ONSET: f64 = PI / 3.0;
 /// smaller: then below that).
 const CORNER_ONSET: f64 = PI / 18.0;
 
-/// Every face with a free vertex, and the penalty's onset at each of its corners.
-fn corners(mesh: &Mesh, row: &[u32]) -> Vec<([u32; 3], [f64; 3])> {
-    mesh.triangles()
+/// The faces with a free vertex (`active`, from [`shape_guard`]) and the penalty's onset at
+/// each of their corners.
+fn corners(mesh: &Mesh, active: &[u32]) -> Vec<([u32; 3], [f64; 3])> {
+    active
         .iter()
-        .filter(|t| t.iter().any(|&v| row[v as usize] != NONE))
-        .map(|&t| {
+        .map(|&f| {
+            let t = mesh.triangles()[f as usize];
             let p = t.map(|v| mesh.position(v));
             let onset = [0, 1, 2]
                 .map(|i| CORNER_ONSET.min(corner_angle(p[i], p[(i + 1) % 3], p[(i + 2) % 3])));
