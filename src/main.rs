@@ -41,8 +41,10 @@ enum Command {
     /// its best result but did not converge (one line on stderr gives the ϖ_max reached, why it
     /// stopped and the stuck vertices), 1 on other failures.
     ///
-    /// flatten parameters: method=lpfb|lscm (lpfb), unit=mm|cm|m|in (drawing unit, mm),
-    /// input_unit=mm|cm|m|in (the mesh's unit, m), max_iterations (200), tolerance (1e-5),
+    /// flatten parameters: method=lpfb|lscm (lpfb), unit=mm|cm|dm|m|in (drawing unit, mm),
+    /// input_unit=auto|mm|cm|dm|m|in (the mesh's unit; auto guesses it from the size),
+    /// cuts=auto|virtual|real (auto: loops that enclose curvature are cut open, the others
+    /// stay holes), curvature_tolerance (1e-3 rad), max_iterations (200), tolerance (1e-5),
     /// svg_triangles=true|false (false).
     ///
     /// fl-mesh parameters: w1 (1), w2 (0.1), tau (0.25), step_rule=merit|fixed|lm (merit),

@@ -9,10 +9,11 @@
 use crate::pattern::Patterns;
 use std::fmt::Write;
 
-/// Millimetres per unit, for `mm`, `cm`, `m`, `in` (None for anything else).
+/// Millimetres per unit, for `mm`, `cm`, `dm`, `m`, `in` (None for anything else).
 pub fn mm_per(unit: &str) -> Option<f64> {
     match unit {
         "mm" => Some(1.0),
+        "dm" => Some(100.0),
         "cm" => Some(10.0),
         "m" => Some(1000.0),
         "in" => Some(25.4),
@@ -113,11 +114,11 @@ pub fn to_svg(p: &Patterns) -> String {
     } else {
         ""
     };
-    // SVG lengths know mm, cm, in but not m: write metres as centimetres × 100.
-    let (wu, hu, uname) = if unit == "m" {
-        (w * 100.0, h * 100.0, "cm")
-    } else {
-        (w, h, unit)
+    // SVG lengths know mm, cm, in but not m or dm: write those as centimetres.
+    let (wu, hu, uname) = match unit {
+        "m" => (w * 100.0, h * 100.0, "cm"),
+        "dm" => (w * 10.0, h * 10.0, "cm"),
+        _ => (w, h, unit),
     };
     let stroke = (w.max(h) / 1500.0).max(f64::MIN_POSITIVE);
     let font = (w.max(h) / 80.0).max(f64::MIN_POSITIVE);

@@ -6,7 +6,8 @@
 
 use super::super::AlgoError;
 use std::cmp::Ordering;
-use std::collections::{BinaryHeap, HashMap};
+use std::collections::{BinaryHeap, HashMap, HashSet};
+use std::f64::consts::PI;
 
 #[inline]
 fn next(c: usize) -> usize {
@@ -163,8 +164,8 @@ pub(crate) fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
 }
 
 impl Piece3 {
-    /// Build a piece from global faces. Fails, naming the piece, when it is closed or not a
-    /// disk with holes (genus > 0).
+    /// Build a piece from global faces. Fails, naming the piece, when it has genus > 0 (a
+    /// closed piece has no boundary loop: [`plan_cuts`] cuts it open or refuses it).
     pub fn build(
         name: String,
         faces: Vec<u32>,
@@ -172,7 +173,54 @@ impl Piece3 {
         all_pos: &[[f64; 3]],
     ) -> Result<Piece3, AlgoError> {
         let gtris: Vec<[u32; 3]> = faces.iter().map(|&f| all_tris[f as usize]).collect();
-        let (class, n, boundary) = wedges(&gtris, |_, _| false);
+        Self::from_triangles(
+            name,
+            faces,
+            &gtris,
+            |v| all_pos[v as usize],
+            &HashSet::new(),
+        )
+    }
+
+    /// The same piece cut open along `paths` (local vertices): every path edge becomes two
+    /// boundary edges, one per side.
+    pub fn cut_open(&self, paths: &[Vec<u32>]) -> Result<Piece3, AlgoError> {
+        let mut cut = HashSet::new();
+        for path in paths {
+            for w in path.windows(2) {
+                let (a, b) = (
+                    self.vertex_ids[w[0] as usize],
+                    self.vertex_ids[w[1] as usize],
+                );
+                cut.insert(key(a, b));
+            }
+        }
+        let gtris: Vec<[u32; 3]> = self
+            .tris
+            .iter()
+            .map(|t| t.map(|w| self.vertex_ids[w as usize]))
+            .collect();
+        let mut pos_of = HashMap::new();
+        for (w, &v) in self.vertex_ids.iter().enumerate() {
+            pos_of.insert(v, self.pos[w]);
+        }
+        Self::from_triangles(
+            self.name.clone(),
+            self.faces.clone(),
+            &gtris,
+            |v| pos_of[&v],
+            &cut,
+        )
+    }
+
+    fn from_triangles(
+        name: String,
+        faces: Vec<u32>,
+        gtris: &[[u32; 3]],
+        pos_of: impl Fn(u32) -> [f64; 3],
+        cut: &HashSet<(u32, u32)>,
+    ) -> Result<Piece3, AlgoError> {
+        let (class, n, boundary) = wedges(gtris, |a, b| cut.contains(&(a, b)));
         let mut vertex_ids = vec![0u32; n];
         for (c, &w) in class.iter().enumerate() {
             vertex_ids[w as usize] = gtris[c / 3][c % 3];
@@ -180,15 +228,9 @@ impl Piece3 {
         let tris: Vec<[u32; 3]> = (0..gtris.len())
             .map(|f| [class[3 * f], class[3 * f + 1], class[3 * f + 2]])
             .collect();
-        let pos: Vec<[f64; 3]> = vertex_ids.iter().map(|&v| all_pos[v as usize]).collect();
+        let pos: Vec<[f64; 3]> = vertex_ids.iter().map(|&v| pos_of(v)).collect();
         let loops = walk_loops(&class, n, &boundary)
             .map_err(|e| AlgoError::Input(format!("patch `{name}`: {e}")))?;
-        if loops.is_empty() {
-            return Err(AlgoError::Input(format!(
-                "patch `{name}` is closed (no boundary loop): cut it into pieces with a boundary \
-                 before flattening"
-            )));
-        }
         let nb = boundary.iter().filter(|&&b| b).count();
         let edges = (3 * tris.len() + nb) / 2;
         let chi = n as i64 - edges as i64 + tris.len() as i64;
@@ -196,7 +238,8 @@ impl Piece3 {
         if genus2 != 0 {
             return Err(AlgoError::Input(format!(
                 "patch `{name}` has genus {} (Euler characteristic {chi} with {} boundary \
-                 loops); only disks, with or without holes, can be flattened",
+                 loops); only disks, with or without holes, and closed surfaces of genus 0 can \
+                 be flattened",
                 genus2 / 2,
                 loops.len()
             )));
@@ -214,7 +257,9 @@ impl Piece3 {
         let outer = (0..loops.len())
             .max_by(|&a, &b| lens[a].partial_cmp(&lens[b]).unwrap_or(Ordering::Equal))
             .unwrap_or(0);
-        loops.swap(0, outer);
+        if !loops.is_empty() {
+            loops.swap(0, outer);
+        }
         Ok(Piece3 {
             name,
             faces,
@@ -224,6 +269,167 @@ impl Piece3 {
             loops,
         })
     }
+
+    /// Angle sum of each local vertex: the 3D corner angles of its wedge.
+    pub fn angle_sums(&self) -> Vec<f64> {
+        let mut sum = vec![0.0; self.pos.len()];
+        for t in &self.tris {
+            let q = t.map(|w| self.pos[w as usize]);
+            for i in 0..3 {
+                sum[t[i] as usize] +=
+                    crate::geometry::corner_angle(q[i], q[(i + 1) % 3], q[(i + 2) % 3]);
+            }
+        }
+        sum
+    }
+
+    /// 3D area.
+    pub fn area(&self) -> f64 {
+        self.tris
+            .iter()
+            .map(|t| {
+                let q = t.map(|w| self.pos[w as usize]);
+                let (u, v) = (
+                    [q[1][0] - q[0][0], q[1][1] - q[0][1], q[1][2] - q[0][2]],
+                    [q[2][0] - q[0][0], q[2][1] - q[0][1], q[2][2] - q[0][2]],
+                );
+                0.5 * dist(
+                    [
+                        u[1] * v[2] - u[2] * v[1],
+                        u[2] * v[0] - u[0] * v[2],
+                        u[0] * v[1] - u[1] * v[0],
+                    ],
+                    [0.0; 3],
+                )
+            })
+            .sum()
+    }
+}
+
+/// Geodesic turning of a boundary loop, Σ (π − a_i) over its vertices (a_i the surface's
+/// inner angle there). Filling the loop with a disk D, Gauss–Bonnet (do Carmo, Differential
+/// Geometry of Curves and Surfaces, Sec. 4-5; discretely the angle-defect form) gives the
+/// Gaussian curvature D would enclose, K(D) = 2π + turning for an inner loop (traversed with
+/// the piece, not D, on its left). A hole can lie closed in the plane only if K(D) = 0.
+pub fn loop_turning(lp: &[u32], angle_sums: &[f64]) -> f64 {
+    lp.iter().map(|&v| PI - angle_sums[v as usize]).sum()
+}
+
+/// How the extra boundary loops of a piece are treated.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Cuts {
+    /// A hole that encloses curvature (|K(D)| above the tolerance) is cut open, the others
+    /// stay holes (default).
+    #[default]
+    Auto,
+    /// Every inner loop stays a hole, closed in the plane (the paper's virtual cuts).
+    Virtual,
+    /// Every inner loop is cut open to the outer loop.
+    Real,
+}
+
+/// The real cuts of a piece and what was decided.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct CutPlan {
+    /// Cut paths (local vertices), each from what it joins to the tree it ends on.
+    pub paths: Vec<Vec<u32>>,
+    /// K(D) of every inner loop (in the order of `Piece3::loops[1..]`).
+    pub enclosed_curvature: Vec<f64>,
+    /// Which inner loops stay holes.
+    pub holes: Vec<bool>,
+    /// Vertices a closed piece was cut through (its curved vertices).
+    pub cone_points: usize,
+}
+
+/// Longest cut tree of a closed piece, in units of √area: a box-like shape needs about 3 (a
+/// cube 2.9, a capped cylinder of height 2r 3.4, an icosahedron 3.7); a smooth closed shape,
+/// whose curvature is spread over every vertex, needs a tree through nearly all of them.
+pub const CLOSED_CUT_BUDGET: f64 = 8.0;
+
+/// Decide the real cuts of a piece.
+///
+/// Open piece: each inner loop whose enclosed curvature K(D) (see [`loop_turning`]) exceeds
+/// `tolerance` in magnitude cannot close flat as a hole; with `Cuts::Auto` it is joined to the
+/// outer loop by the shortest interior edge path ([`grow_tree`], roots the outer loop and the
+/// loops joined so far). The path runs where the cut costs least seam length; it never
+/// touches a hole that stays.
+///
+/// Closed piece (genus 0): the curvature sits at its curved vertices (|2π − θ| above
+/// `tolerance`); cut along a shortest-path tree through all of them, the piece is a disk
+/// whose interior is flat. Refused (an error naming why) when the tree would be longer than
+/// [`CLOSED_CUT_BUDGET`]·√area or there are fewer than two curved vertices.
+pub fn plan_cuts(p: &Piece3, mode: Cuts, tolerance: f64) -> Result<CutPlan, String> {
+    let sums = p.angle_sums();
+    let adj = interior_adjacency(p);
+    let mut plan = CutPlan::default();
+    if p.loops.is_empty() {
+        let mut curved: Vec<u32> = (0..p.pos.len() as u32)
+            .filter(|&v| (2.0 * PI - sums[v as usize]).abs() > tolerance)
+            .collect();
+        plan.cone_points = curved.len();
+        if curved.len() < 2 {
+            return Err(format!(
+                "it is closed and its curvature is spread thinly ({} vertices curved by more \
+                 than {tolerance:e} rad), so no short cut opens it flat",
+                curved.len()
+            ));
+        }
+        curved.sort_by(|&a, &b| {
+            let k = |v: u32| (2.0 * PI - sums[v as usize]).abs();
+            k(b).total_cmp(&k(a)).then(a.cmp(&b))
+        });
+        let groups: Vec<Vec<u32>> = curved[1..].iter().map(|&v| vec![v]).collect();
+        let budget = CLOSED_CUT_BUDGET * p.area().sqrt();
+        let blocked = vec![false; p.pos.len()];
+        plan.paths = grow_tree(&p.pos, &adj, &curved[..1], &groups, &blocked, budget).map_err(
+            |e| match e {
+                GrowError::TooLong => format!(
+                    "it is closed and curved at {} of its {} vertices: a cut through them all \
+                     would be longer than {CLOSED_CUT_BUDGET}·√area, so it is not a pattern \
+                     piece (a button, a collider, a body?)",
+                    curved.len(),
+                    p.pos.len()
+                ),
+                GrowError::Unreachable(_) => "its curved vertices are not connected".into(),
+            },
+        )?;
+        return Ok(plan);
+    }
+    let inner = &p.loops[1..];
+    plan.enclosed_curvature = inner
+        .iter()
+        .map(|lp| 2.0 * PI + loop_turning(lp, &sums))
+        .collect();
+    plan.holes = plan
+        .enclosed_curvature
+        .iter()
+        .map(|k| match mode {
+            Cuts::Auto => k.abs() <= tolerance,
+            Cuts::Virtual => true,
+            Cuts::Real => false,
+        })
+        .collect();
+    let to_cut: Vec<Vec<u32>> = inner
+        .iter()
+        .zip(&plan.holes)
+        .filter(|(_, &h)| !h)
+        .map(|(lp, _)| lp.clone())
+        .collect();
+    if to_cut.is_empty() {
+        return Ok(plan);
+    }
+    let mut blocked = vec![false; p.pos.len()];
+    for (lp, &h) in inner.iter().zip(&plan.holes) {
+        if h {
+            for &v in lp {
+                blocked[v as usize] = true;
+            }
+        }
+    }
+    plan.paths = grow_tree(&p.pos, &adj, &p.loops[0], &to_cut, &blocked, f64::INFINITY)
+        .map_err(|_| "a boundary loop cannot be reached from the outer loop".to_string())?;
+    Ok(plan)
 }
 
 #[derive(PartialEq)]
@@ -242,19 +448,9 @@ impl Ord for Item {
     }
 }
 
-/// The virtual cut (Sec. 3.2, steps 2–3): returns the cut paths, each a list of local vertices
-/// starting on the inner loop it attaches and ending on the outer loop or on an earlier path.
-/// Each round is one multi-source Dijkstra over interior edges (3D lengths) from everything
-/// already attached to the nearest inner loop not yet attached; by symmetry of shortest paths
-/// this is the paper's shortest path from that inner loop to the attached set, and the paths
-/// never cross.
-pub fn cut_paths(p: &Piece3) -> Result<Vec<Vec<u32>>, AlgoError> {
-    let n = p.pos.len();
-    if p.loops.len() <= 1 {
-        return Ok(Vec::new());
-    }
-    // adjacency over interior edges only
-    let mut adj: Vec<Vec<u32>> = vec![Vec::new(); n];
+/// Interior-edge adjacency of a piece (both directions): the edges a cut may run along.
+fn interior_adjacency(p: &Piece3) -> Vec<Vec<u32>> {
+    let mut adj: Vec<Vec<u32>> = vec![Vec::new(); p.pos.len()];
     let (_, _, boundary) = wedges(&p.tris, |_, _| false);
     for (f, t) in p.tris.iter().enumerate() {
         for i in 0..3 {
@@ -267,77 +463,139 @@ pub fn cut_paths(p: &Piece3) -> Result<Vec<Vec<u32>>, AlgoError> {
             }
         }
     }
-    // loop id per vertex
-    let mut on_loop = vec![u32::MAX; n];
-    for (li, l) in p.loops.iter().enumerate() {
-        for &v in l {
-            on_loop[v as usize] = li as u32;
+    adj
+}
+
+/// Why [`grow_tree`] stopped short.
+#[derive(Debug, Clone, PartialEq)]
+pub enum GrowError {
+    /// This target group cannot be reached along interior edges.
+    Unreachable(usize),
+    /// The paths would be longer in total than the budget.
+    TooLong,
+}
+
+/// Shortest-path tree growth (a Prim-like Steiner heuristic): starting from `roots`, join the
+/// nearest target group not yet joined by a shortest path over interior edges (3D lengths) to
+/// everything joined so far, then add the group and the path to the tree; repeat until every
+/// group is joined. Each path starts on its group and ends on the tree, and by symmetry of
+/// shortest paths is the shortest path from that group to the tree, so paths never cross.
+///
+/// Distances to the tree are kept between rounds and only lowered by a Dijkstra wave from each
+/// new path (so k rounds cost about one Dijkstra plus the waves, not k Dijkstras). Paths never
+/// pass through a vertex of a group not yet joined, nor through a `blocked` vertex. Returns
+/// the paths in the order they were made.
+pub fn grow_tree(
+    pos: &[[f64; 3]],
+    adj: &[Vec<u32>],
+    roots: &[u32],
+    groups: &[Vec<u32>],
+    blocked: &[bool],
+    max_length: f64,
+) -> Result<Vec<Vec<u32>>, GrowError> {
+    let n = pos.len();
+    let mut group_of = vec![u32::MAX; n];
+    for (g, vs) in groups.iter().enumerate() {
+        for &v in vs {
+            group_of[v as usize] = g as u32;
         }
     }
-    let mut attached_loop = vec![false; p.loops.len()];
-    attached_loop[0] = true;
-    let mut attached = vec![false; n];
-    for &v in &p.loops[0] {
-        attached[v as usize] = true;
-    }
-    let mut paths = Vec::new();
+    let mut in_tree = vec![false; n];
     let mut d = vec![f64::INFINITY; n];
     let mut prev = vec![u32::MAX; n];
-    for _round in 1..p.loops.len() {
-        d.iter_mut().for_each(|x| *x = f64::INFINITY);
-        prev.iter_mut().for_each(|x| *x = u32::MAX);
-        let mut heap = BinaryHeap::new();
-        for v in 0..n {
-            if attached[v] {
-                d[v] = 0.0;
-                heap.push(Item(0.0, v as u32));
-            }
-        }
-        let mut hit = None;
-        while let Some(Item(dv, v)) = heap.pop() {
+    let mut wave = BinaryHeap::new();
+    let mut targets = BinaryHeap::new();
+    let mut joined = vec![false; groups.len()];
+    fn add(v: u32, in_tree: &mut [bool], d: &mut [f64], wave: &mut BinaryHeap<Item>) {
+        in_tree[v as usize] = true;
+        d[v as usize] = 0.0;
+        wave.push(Item(0.0, v));
+    }
+    for &r in roots {
+        add(r, &mut in_tree, &mut d, &mut wave);
+    }
+    let (mut paths, mut total) = (Vec::new(), 0.0);
+    for _round in 0..groups.len() {
+        while let Some(Item(dv, v)) = wave.pop() {
             if dv > d[v as usize] {
                 continue;
             }
-            let lv = on_loop[v as usize];
-            if !attached[v as usize] && lv != u32::MAX && !attached_loop[lv as usize] {
-                hit = Some(v);
-                break;
+            if group_of[v as usize] != u32::MAX && !in_tree[v as usize] {
+                targets.push(Item(dv, v)); // a group not joined: reached, not crossed
+                continue;
             }
             for &w in &adj[v as usize] {
-                if attached[w as usize] {
+                if in_tree[w as usize] || blocked[w as usize] {
                     continue;
                 }
-                let nd = dv + dist(p.pos[v as usize], p.pos[w as usize]);
+                let nd = dv + dist(pos[v as usize], pos[w as usize]);
                 if nd < d[w as usize] {
                     d[w as usize] = nd;
                     prev[w as usize] = v;
-                    heap.push(Item(nd, w));
+                    wave.push(Item(nd, w));
                 }
             }
         }
-        let Some(t) = hit else {
-            return Err(AlgoError::Input(format!(
-                "patch `{}`: an inner boundary loop cannot be reached from the outer loop",
-                p.name
-            )));
+        let t = loop {
+            match targets.pop() {
+                None => {
+                    let g = joined.iter().position(|&j| !j).unwrap_or(0);
+                    return Err(GrowError::Unreachable(g));
+                }
+                Some(Item(dt, t)) => {
+                    let g = group_of[t as usize] as usize;
+                    if dt <= d[t as usize] && !in_tree[t as usize] && !joined[g] {
+                        break t;
+                    }
+                }
+            }
         };
+        total += d[t as usize];
+        if total > max_length {
+            return Err(GrowError::TooLong);
+        }
         let mut path = vec![t];
         let mut v = t;
-        while !attached[v as usize] {
+        while !in_tree[v as usize] {
             v = prev[v as usize];
             path.push(v);
         }
-        let li = on_loop[t as usize] as usize;
-        attached_loop[li] = true;
-        for &v in &p.loops[li] {
-            attached[v as usize] = true;
-        }
-        for &v in &path {
-            attached[v as usize] = true;
+        let g = group_of[t as usize] as usize;
+        joined[g] = true;
+        for &v in groups[g].iter().chain(&path) {
+            if !in_tree[v as usize] {
+                add(v, &mut in_tree, &mut d, &mut wave);
+            }
         }
         paths.push(path);
     }
     Ok(paths)
+}
+
+/// The virtual cut (Sec. 3.2, steps 2–3): returns the cut paths, each a list of local vertices
+/// starting on the inner loop it attaches and ending on the outer loop or on an earlier path.
+/// The paper joins each inner loop to the outer one by a shortest path; [`grow_tree`] with
+/// the outer loop as root and the inner loops as groups does that, nearest loop first.
+pub fn cut_paths(p: &Piece3) -> Result<Vec<Vec<u32>>, AlgoError> {
+    if p.loops.len() <= 1 {
+        return Ok(Vec::new());
+    }
+    let adj = interior_adjacency(p);
+    let blocked = vec![false; p.pos.len()];
+    grow_tree(
+        &p.pos,
+        &adj,
+        &p.loops[0],
+        &p.loops[1..],
+        &blocked,
+        f64::INFINITY,
+    )
+    .map_err(|_| {
+        AlgoError::Input(format!(
+            "patch `{}`: an inner boundary loop cannot be reached from the outer loop",
+            p.name
+        ))
+    })
 }
 
 /// The cut disk P_d: its single boundary loop (as piece vertices, surface on the left), the

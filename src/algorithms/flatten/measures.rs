@@ -34,6 +34,10 @@ pub struct Measures {
     pub pi_theta: f64,
     /// Largest |l_e − l_e⁰| / l_e⁰ over boundary edges.
     pub boundary_length_max_rel_error: f64,
+    /// The boundary edge where that is reached, as mesh vertices.
+    pub boundary_worst_edge: [u32; 2],
+    /// ϖ_max = max |2π − θ| over the piece's interior vertices (3D): 0 for a developable piece.
+    pub varpi_max: f64,
     /// |perimeter_2D − perimeter_3D| / perimeter_3D.
     pub perimeter_rel_error: f64,
     /// Triangles with non-positive 2D area.
@@ -293,6 +297,7 @@ pub fn compute(
         m.area_distortion_pct = (m.area_2d - m.area_3d) / m.area_3d * 100.0;
     }
     let (mut nb, mut sum_l, mut sum_t) = (0usize, 0.0, 0.0);
+    let mut on_boundary = vec![false; pos.len()];
     let (mut per2, mut per3) = (0.0, 0.0);
     for lp in loops {
         for k in 0..lp.len() {
@@ -301,10 +306,11 @@ pub fn compute(
             let d = [uv[j][0] - uv[i][0], uv[j][1] - uv[i][1]];
             let l = (d[0] * d[0] + d[1] * d[1]).sqrt();
             sum_l += (l - l0).abs();
-            if l0 > 0.0 {
-                m.boundary_length_max_rel_error =
-                    m.boundary_length_max_rel_error.max((l - l0).abs() / l0);
+            if l0 > 0.0 && (l - l0).abs() / l0 > m.boundary_length_max_rel_error {
+                m.boundary_length_max_rel_error = (l - l0).abs() / l0;
+                m.boundary_worst_edge = [vertex_ids[i], vertex_ids[j]];
             }
+            on_boundary[i] = true;
             sum_t += (inner3d[i] - inner2d[i]).abs();
             per2 += l;
             per3 += l0;
@@ -318,6 +324,10 @@ pub fn compute(
     if per3 > 0.0 {
         m.perimeter_rel_error = (per2 - per3).abs() / per3;
     }
+    m.varpi_max = (0..pos.len())
+        .filter(|&v| !on_boundary[v])
+        .map(|v| (std::f64::consts::TAU - inner3d[v]).abs())
+        .fold(0.0, f64::max);
     m.boundary_intersections = boundary_intersections(uv, loops, vertex_ids);
     m.overlap = (m.flipped_triangles > 0 || m.boundary_intersections > 0) as u8;
     m

@@ -3,18 +3,32 @@
 //!
 //! Per piece (a connected component of a patch; rayon over pieces):
 //! 1. topology ([`cut`]): wedge-split vertices, boundary loops, outer loop = longest in 3D;
-//!    for several loops the virtual cut of Sec. 3.2 (Dijkstra paths inner → outer);
-//! 2. LPFB ([`lpfb`]): Eq. 9/10 solved by Eq. 11–14, boundary by Eq. 6–7, mapped back from the
+//! 2. real cuts ([`cut::plan_cuts`], beyond the paper): an inner loop stays a hole only if it
+//!    can close in the plane, i.e. a disk filling it would enclose no Gaussian curvature
+//!    (Gauss–Bonnet, [`cut::loop_turning`]); a tube's other rim, a cone's small rim, a sleeve
+//!    opening cannot, and are cut open to the outer loop along shortest interior paths. A
+//!    closed piece is cut along a shortest-path tree through its curved vertices. The paper
+//!    keeps every loop as a hole (Sec. 3.2), which for a tube gives flipped triangles and a
+//!    boundary stretched 30-fold; `cuts = "virtual"` still does that;
+//! 3. the virtual cut of Sec. 3.2 for the holes that stay (Dijkstra paths inner → outer);
+//! 4. LPFB ([`lpfb`]): Eq. 9/10 solved by Eq. 11–14, boundary by Eq. 6–7, mapped back from the
 //!    cut loop to the loops of the piece (Sec. 3.2 step 6);
-//! 3. interior ([`param`]): intrinsic parameterization with the LPFB fixed, Eq. 15–18;
-//! 4. measures ([`measures`]): A(Ω), L²/L∞ stretch, Π_L, Π_θ, flips, S(Ω), σ1/σ2 stretch.
+//! 5. interior ([`param`]): intrinsic parameterization with the LPFB fixed, Eq. 15–18;
+//! 6. measures ([`measures`]): A(Ω), L²/L∞ stretch, Π_L, Π_θ, flips, S(Ω), σ1/σ2 stretch, the
+//!    worst boundary edge against 3D, ϖ_max of the piece.
 //!
-//! `method = "lscm"` replaces 2–3 by a free-boundary LSCM (baseline, as in Table 1).
-//! Seams: every chain of edges shared by two pieces, with its 3D length and its length on both.
+//! `method = "lscm"` replaces 3–5 by a free-boundary LSCM (baseline, as in Table 1).
+//! Seams: every chain of edges shared by two pieces, with its 3D length and its length on both,
+//! and every real cut as a seam of its piece with itself.
+//!
+//! A piece that cannot be flattened (genus > 0, closed with its curvature spread out) is
+//! skipped with a warning naming it and its triangles; the others are still produced.
 //!
 //! Units: the JSON pattern is in the mesh's own units. The mesh's unit is the parameter
-//! `input_unit` (default `m`, the unit of glTF and of most garment exports); the SVG and DXF
-//! drawings are scaled to `unit` (default `mm`).
+//! `input_unit`, guessed from the mesh's size by default ([`Unit::guess`]: garment exports
+//! come in m, cm, mm and MakeHuman's dm, and a guess that is wrong by 10× is obvious in the
+//! drawing, whereas a fixed default of metres drew a centimetre mesh 64 m wide); the SVG and
+//! DXF drawings are scaled to `unit` (default `mm`).
 
 pub mod cut;
 pub mod lpfb;
@@ -22,6 +36,7 @@ pub mod measures;
 pub mod param;
 
 use super::{AlgoError, Control, Outcome};
+use crate::geometry::DEVELOPABLE_TOLERANCE;
 use crate::mesh::{Mesh, NONE};
 use crate::pattern::{Patterns, Piece, Seam};
 use rayon::prelude::*;
@@ -49,6 +64,8 @@ pub enum Unit {
     Mm,
     /// Centimetre.
     Cm,
+    /// Decimetre (MakeHuman's unit).
+    Dm,
     /// Metre.
     M,
     /// Inch.
@@ -61,14 +78,67 @@ impl Unit {
         match self {
             Unit::Mm => "mm",
             Unit::Cm => "cm",
+            Unit::Dm => "dm",
             Unit::M => "m",
             Unit::In => "in",
         }
     }
 }
 
-fn default_input_unit() -> Unit {
-    Unit::M
+impl Unit {
+    /// The unit a mesh of this bounding-box diagonal is most likely in, taking the pieces to be
+    /// garment-sized: the one unit that puts the diagonal in [0.3, 3) m (a garment is 0.3–2 m,
+    /// a whole outfit in T-pose up to ~2.6 m). Below that range metres, above it millimetres.
+    /// So diagonal d < 3 → m, 3 ≤ d < 30 → dm, 30 ≤ d < 300 → cm, else mm.
+    pub fn guess(diagonal: f64) -> Unit {
+        if diagonal.is_nan() || diagonal < 3.0 {
+            Unit::M
+        } else if diagonal < 30.0 {
+            Unit::Dm
+        } else if diagonal < 300.0 {
+            Unit::Cm
+        } else {
+            Unit::Mm
+        }
+    }
+}
+
+/// The unit of the mesh's coordinates: a [`Unit`], or `auto` (default) to guess it from the
+/// mesh's size ([`Unit::guess`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum InputUnit {
+    /// Guess from the bounding-box diagonal.
+    #[default]
+    Auto,
+    /// Millimetre.
+    Mm,
+    /// Centimetre.
+    Cm,
+    /// Decimetre.
+    Dm,
+    /// Metre.
+    M,
+    /// Inch.
+    In,
+}
+
+impl InputUnit {
+    /// The unit given, None for `auto`.
+    pub fn fixed(self) -> Option<Unit> {
+        match self {
+            InputUnit::Auto => None,
+            InputUnit::Mm => Some(Unit::Mm),
+            InputUnit::Cm => Some(Unit::Cm),
+            InputUnit::Dm => Some(Unit::Dm),
+            InputUnit::M => Some(Unit::M),
+            InputUnit::In => Some(Unit::In),
+        }
+    }
+}
+
+fn default_curvature_tolerance() -> f64 {
+    1e-3
 }
 fn default_max_iterations() -> usize {
     200
@@ -87,9 +157,16 @@ pub struct Params {
     /// Unit of the SVG and DXF drawings (`mm` default, `cm`, `m`, `in`).
     #[serde(default)]
     pub unit: Unit,
-    /// Unit the mesh's coordinates are in (`m` default).
-    #[serde(default = "default_input_unit")]
-    pub input_unit: Unit,
+    /// Unit the mesh's coordinates are in (`auto` default: guessed from its size).
+    #[serde(default)]
+    pub input_unit: InputUnit,
+    /// How inner boundary loops are treated: `auto` (default), `virtual`, `real`.
+    #[serde(default)]
+    pub cuts: cut::Cuts,
+    /// Curvature (radians) a hole may enclose and still stay closed in the plane, and above
+    /// which a vertex of a closed piece counts as curved (1e-3).
+    #[serde(default = "default_curvature_tolerance")]
+    pub curvature_tolerance: f64,
     /// Most SQP iterations of LPFB (Eq. 12) per piece.
     #[serde(default = "default_max_iterations")]
     pub max_iterations: usize,
@@ -106,7 +183,9 @@ impl Default for Params {
         Params {
             method: Method::Lpfb,
             unit: Unit::Mm,
-            input_unit: Unit::M,
+            input_unit: InputUnit::Auto,
+            cuts: cut::Cuts::Auto,
+            curvature_tolerance: default_curvature_tolerance(),
             max_iterations: default_max_iterations(),
             tolerance: default_tolerance(),
             svg_triangles: false,
@@ -121,6 +200,12 @@ impl Params {
             return Err(AlgoError::InvalidParam {
                 key: "max_iterations".into(),
                 message: format!("must be in 1..=100000, got {}", self.max_iterations),
+            });
+        }
+        if !(self.curvature_tolerance > 0.0 && self.curvature_tolerance < 1.0) {
+            return Err(AlgoError::InvalidParam {
+                key: "curvature_tolerance".into(),
+                message: format!("must be in (0, 1), got {}", self.curvature_tolerance),
             });
         }
         if !(self.tolerance > 0.0 && self.tolerance < 1.0) {
@@ -140,9 +225,18 @@ pub struct PieceInfo {
     pub piece: String,
     /// Faces.
     pub faces: usize,
-    /// Boundary loops.
+    /// Boundary loops of the piece as given.
     pub loops: usize,
-    /// Cut paths of the virtual cut.
+    /// Real cuts made (each a seam of the piece with itself).
+    pub real_cuts: usize,
+    /// Inner loops kept as holes, closed in the plane.
+    pub holes: usize,
+    /// K(D) = 2π + turning of each inner loop as given: the curvature a disk filling it would
+    /// enclose (0 for a hole that can close flat).
+    pub enclosed_curvature: Vec<f64>,
+    /// Curved vertices a closed piece was cut through.
+    pub cone_points: usize,
+    /// Cut paths of the virtual cut (one per hole).
     pub cut_paths: usize,
     /// LPFB SQP iterations.
     pub iterations: usize,
@@ -165,10 +259,14 @@ pub struct PieceInfo {
     pub seconds_param: f64,
     /// Seconds in the measures.
     pub seconds_measures: f64,
+    /// The real cuts as mesh vertex paths, for the seams.
+    #[serde(skip)]
+    pub real_cut_paths: Vec<Vec<u32>>,
 }
 
-/// The pieces of a mesh: one per connected component of each patch.
-pub fn pieces_of(mesh: &Mesh) -> Result<Vec<cut::Piece3>, AlgoError> {
+/// The pieces of a mesh: one per connected component of each patch, as its name (the patch
+/// name, `#k` appended when a patch has several components) and its faces.
+pub fn components(mesh: &Mesh) -> Vec<(String, Vec<u32>)> {
     let nf = mesh.num_faces();
     let fp = mesh.face_patch();
     let mut parent: Vec<u32> = (0..nf as u32).collect();
@@ -209,15 +307,21 @@ pub fn pieces_of(mesh: &Mesh) -> Result<Vec<cut::Piece3>, AlgoError> {
             } else {
                 base.clone()
             };
-            out.push(cut::Piece3::build(
-                name,
-                faces,
-                mesh.triangles(),
-                mesh.positions(),
-            )?);
+            out.push((name, faces));
         }
     }
-    Ok(out)
+    out
+}
+
+/// Where a piece is in the input, for messages: its patch (OBJ group, glTF primitive) and the
+/// range of its triangles in mesh order.
+fn describe(name: &str, faces: &[u32]) -> String {
+    let lo = faces.iter().min().copied().unwrap_or(0);
+    let hi = faces.iter().max().copied().unwrap_or(0);
+    format!(
+        "piece `{name}` (triangles {lo}–{hi}, {} in all)",
+        faces.len()
+    )
 }
 
 fn diameter(pos: &[[f64; 3]]) -> f64 {
@@ -304,18 +408,42 @@ pub fn lpfb_boundary(
 
 /// Flatten one piece.
 pub fn flatten_piece(
-    p: &cut::Piece3,
+    given: &cut::Piece3,
     params: &Params,
     control: &dyn Control,
 ) -> Result<(Piece, PieceInfo), AlgoError> {
-    let err = |e: String| AlgoError::Input(format!("piece `{}`: {e}", p.name));
+    let err = |e: String| AlgoError::Input(format!("piece `{}`: {e}", given.name));
+    let plan = cut::plan_cuts(given, params.cuts, params.curvature_tolerance).map_err(err)?;
     let mut info = PieceInfo {
-        piece: p.name.clone(),
-        faces: p.tris.len(),
-        loops: p.loops.len(),
+        piece: given.name.clone(),
+        faces: given.tris.len(),
+        loops: given.loops.len(),
+        real_cuts: plan.paths.len(),
+        holes: plan.holes.iter().filter(|&&h| h).count(),
+        enclosed_curvature: plan.enclosed_curvature.clone(),
+        cone_points: plan.cone_points,
         converged: true,
+        real_cut_paths: plan
+            .paths
+            .iter()
+            .map(|path| path.iter().map(|&w| given.vertex_ids[w as usize]).collect())
+            .collect(),
         ..PieceInfo::default()
     };
+    let opened;
+    let p = if plan.paths.is_empty() {
+        given
+    } else {
+        opened = given.cut_open(&plan.paths)?;
+        &opened
+    };
+    if p.loops.len() != 1 + info.holes {
+        return Err(err(format!(
+            "cutting left {} boundary loops, expected {}",
+            p.loops.len(),
+            1 + info.holes
+        )));
+    }
     let t0 = Instant::now();
     let uv = match params.method {
         Method::Lpfb => {
@@ -471,30 +599,174 @@ pub fn seams(mesh: &Mesh, pieces: &[Piece]) -> Vec<Seam> {
     out
 }
 
+/// Seams of the real cuts: each cut path is a seam of its piece with itself, side 0 the faces
+/// on the path's left (where the edge runs in path order), side 1 those on its right; both
+/// sides list their edges in path order.
+pub fn cut_seams(mesh: &Mesh, pieces: &[Piece], infos: &[PieceInfo]) -> Vec<Seam> {
+    let mut out = Vec::new();
+    for (pi, (p, info)) in pieces.iter().zip(infos).enumerate() {
+        if info.real_cut_paths.is_empty() {
+            continue;
+        }
+        // mesh half-edge (a → b) → the piece's (a', b')
+        let mut half: HashMap<(u32, u32), [u32; 2]> = HashMap::new();
+        for t in &p.triangles {
+            for i in 0..3 {
+                let (a, b) = (t[i], t[(i + 1) % 3]);
+                half.insert((p.vertex_ids[a as usize], p.vertex_ids[b as usize]), [a, b]);
+            }
+        }
+        let len2 = |e: [u32; 2]| {
+            let (a, b) = (p.uv[e[0] as usize], p.uv[e[1] as usize]);
+            ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt()
+        };
+        for path in &info.real_cut_paths {
+            let mut s = Seam {
+                patches: [p.patch.clone(), p.patch.clone()],
+                pieces: [pi, pi],
+                ..Seam::default()
+            };
+            for w in path.windows(2) {
+                let (u, v) = (w[0], w[1]);
+                s.length_3d += cut::dist(mesh.position(u), mesh.position(v));
+                if let Some(&e) = half.get(&(u, v)) {
+                    s.lengths[0] += len2(e);
+                    s.edges[0].push(e);
+                }
+                if let Some(&[b, a]) = half.get(&(v, u)) {
+                    s.lengths[1] += len2([a, b]);
+                    s.edges[1].push([a, b]);
+                }
+            }
+            out.push(s);
+        }
+    }
+    out
+}
+
+/// What is wrong with a flattened piece, in words, or None.
+fn piece_warning(p: &Piece, i: &PieceInfo, params: &Params) -> Option<String> {
+    let num = |k: &str| p.measures.get(k).and_then(|v| v.as_f64()).unwrap_or(0.0);
+    let mut what = Vec::new();
+    if !i.converged {
+        what.push(format!(
+            "LPFB did not converge (‖∇J‖ = {:.3e} after {} iterations)",
+            i.grad_norm, i.iterations
+        ));
+    }
+    let bl = num("boundary_length_max_rel_error");
+    if bl > BOUNDARY_LENGTH_TOLERANCE {
+        let e = p
+            .measures
+            .get("boundary_worst_edge")
+            .cloned()
+            .unwrap_or_default();
+        what.push(format!(
+            "boundary edge {e} differs from its 3D length by {:.2e} relative",
+            bl
+        ));
+    }
+    let flips = num("flipped_triangles") as u64;
+    if flips > 0 || num("overlap") > 0.0 {
+        let varpi = num("varpi_max");
+        let curved_holes: Vec<String> = i
+            .enclosed_curvature
+            .iter()
+            .filter(|k| k.abs() > params.curvature_tolerance)
+            .map(|k| format!("{k:.3}"))
+            .collect();
+        let why = if i.holes > 0 && !curved_holes.is_empty() {
+            format!(
+                "its holes enclose curvature ({} rad) and cannot close flat: flatten with \
+                 cuts=auto or cuts=real",
+                curved_holes.join(", ")
+            )
+        } else if varpi > DEVELOPABLE_TOLERANCE {
+            format!(
+                "it is not developable (ϖ_max {varpi:.3e} rad): make it more developable \
+                 (fl-mesh) or split it into patches"
+            )
+        } else {
+            format!(
+                "it is developable (ϖ_max {varpi:.1e} rad) but its flat shape wraps onto \
+                 itself: split it into patches"
+            )
+        };
+        let overlap = if flips > 0 {
+            format!("{flips} flipped triangles")
+        } else {
+            "the pattern overlaps itself".to_string()
+        };
+        what.push(format!("{overlap}; {why}"));
+    }
+    (!what.is_empty()).then(|| format!("piece `{}`: {}", p.patch, what.join("; ")))
+}
+
+/// A boundary edge whose 2D length differs from 3D by more than this (relative) is named in a
+/// warning: LPFB lays the boundary out with the 3D lengths, so it reaches ~1e-14.
+pub const BOUNDARY_LENGTH_TOLERANCE: f64 = 1e-9;
+
 /// Run `flatten` on a mesh.
 pub fn run(mesh: &Mesh, params: &Params, control: &dyn Control) -> Result<Outcome, AlgoError> {
     params.check()?;
     let t0 = Instant::now();
-    let p3 = pieces_of(mesh)?;
+    let mut job_warnings = Vec::new();
+    let input_unit = params
+        .input_unit
+        .fixed()
+        .unwrap_or_else(|| Unit::guess(diameter(mesh.positions())));
+    let comps = components(mesh);
     let t_topo = t0.elapsed().as_secs_f64();
-    let results: Vec<Result<(Piece, PieceInfo), AlgoError>> = p3
+    let results: Vec<Result<(Piece, PieceInfo), AlgoError>> = comps
         .par_iter()
-        .map(|p| flatten_piece(p, params, control))
+        .map(|(name, faces)| {
+            let p = cut::Piece3::build(
+                name.clone(),
+                faces.clone(),
+                mesh.triangles(),
+                mesh.positions(),
+            )?;
+            flatten_piece(&p, params, control)
+        })
         .collect();
     let mut pieces = Vec::with_capacity(results.len());
     let mut infos = Vec::with_capacity(results.len());
-    for r in results {
-        let (p, i) = r?;
-        pieces.push(p);
-        infos.push(i);
+    for (r, (name, faces)) in results.into_iter().zip(&comps) {
+        match r {
+            Ok((p, i)) => {
+                pieces.push(p);
+                infos.push(i);
+            }
+            Err(AlgoError::Cancelled) => return Err(AlgoError::Cancelled),
+            Err(e) => job_warnings.push(format!("{} skipped: {e}", describe(name, faces))),
+        }
+    }
+    if pieces.is_empty() {
+        return Err(AlgoError::Input(format!(
+            "no piece could be flattened: {}",
+            job_warnings.join("; ")
+        )));
     }
     let t1 = Instant::now();
-    let seams = seams(mesh, &pieces);
+    let mut seams = seams(mesh, &pieces);
+    seams.extend(cut_seams(mesh, &pieces, &infos));
     let t_seams = t1.elapsed().as_secs_f64();
     let mut summary = serde_json::Map::new();
     summary.insert("method".into(), serde_json::json!(params.method));
-    summary.insert("input_unit".into(), serde_json::json!(params.input_unit));
+    summary.insert("input_unit".into(), serde_json::json!(input_unit));
+    if params.input_unit == InputUnit::Auto {
+        summary.insert(
+            "input_unit_guessed".into(),
+            serde_json::json!(format!(
+                "input_unit not given: `{}` assumed from the bounding-box diagonal {:.4} (the unit \
+                 that puts it in [0.3, 3) m); pass input_unit to override",
+                input_unit.name(),
+                diameter(mesh.positions())
+            )),
+        );
+    }
     summary.insert("unit".into(), serde_json::json!(params.unit));
+    summary.insert("cuts".into(), serde_json::json!(params.cuts));
     let per_piece: Vec<serde_json::Value> = pieces
         .iter()
         .zip(&infos)
@@ -522,37 +794,12 @@ pub fn run(mesh: &Mesh, params: &Params, control: &dyn Control) -> Result<Outcom
         )
         .unwrap_or_default(),
     );
-    // Say in words when a piece is not a usable pattern: a whole garment body as one patch,
-    // say, is too curved to lie flat without folding over itself.
-    let job_warnings: Vec<String> = pieces
-        .iter()
-        .zip(&infos)
-        .filter_map(|(p, i)| {
-            let flips = p.measures["flipped_triangles"].as_u64().unwrap_or(0);
-            let overlap = p.measures["overlap"].as_u64().unwrap_or(0);
-            let mut what = Vec::new();
-            if !i.converged {
-                what.push(format!(
-                    "LPFB did not converge (‖∇J‖ = {:.3e} after {} iterations)",
-                    i.grad_norm, i.iterations
-                ));
-            }
-            if flips > 0 {
-                what.push(format!("{flips} flipped triangles"));
-            }
-            if overlap > 0 {
-                what.push("the pattern overlaps itself".to_string());
-            }
-            (!what.is_empty()).then(|| {
-                format!(
-                    "piece `{}`: {}; it is too curved to lie flat as one piece: make it more \
-                     developable (fl-mesh) or split it into patches",
-                    p.patch,
-                    what.join(", ")
-                )
-            })
-        })
-        .collect();
+    job_warnings.extend(
+        pieces
+            .iter()
+            .zip(&infos)
+            .filter_map(|(p, i)| piece_warning(p, i, params)),
+    );
     summary.insert("job_warnings".into(), serde_json::json!(job_warnings));
     summary.insert(
         "all_converged".into(),
@@ -572,7 +819,7 @@ pub fn run(mesh: &Mesh, params: &Params, control: &dyn Control) -> Result<Outcom
     let patterns = Patterns {
         pieces,
         seams,
-        input_unit: params.input_unit.name().to_string(),
+        input_unit: input_unit.name().to_string(),
         unit: params.unit.name().to_string(),
         svg_triangles: params.svg_triangles,
     };

@@ -1,0 +1,208 @@
+//! flatten over the regression corpus, one line per piece, with the figures a pattern maker
+//! checks recomputed here from the pattern (never taken from the flatten module's measures,
+//! except its exact overlap test S(Ω), which is printed beside a brute-force recount):
+//!
+//!     cargo run --release --example flatten_corpus -- [FILTER] [--fl-mesh] [--out DIR]
+//!         [--set KEY=VALUE ...] [--no-shared | --shared-only]
+//!
+//! With `--fl-mesh` every mesh first goes through fl-mesh (default parameters; the result is
+//! cached as DIR/NAME.fl.obj with DIR/NAME.fl.txt saying whether it converged) and the
+//! flattened mesh is fl-mesh's output. Each pattern is written to DIR/NAME.svg (DIR defaults
+//! to target/flatten_corpus).
+//!
+//! Columns: faces, boundary loops as given, real cuts, holes kept, flipped triangles (signed
+//! area ≤ 0), boundary crossings (every pair of boundary segments), S(Ω), largest relative
+//! edge-length error over all triangle edges (2D against 3D: the stretch an isometry would
+//! not have), largest relative boundary-edge error, ϖ_max of the piece's interior.
+
+use flatmesh::algorithms::{fl_mesh, flatten, parse_params, Silent};
+use flatmesh::corpus;
+use flatmesh::mesh::Mesh;
+use flatmesh::pattern::Piece;
+use std::path::{Path, PathBuf};
+
+fn d2(a: [f64; 2], b: [f64; 2]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt()
+}
+
+fn d3(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+fn edge_error<'a>(mesh: &Mesh, p: &Piece, edges: impl Iterator<Item = (&'a u32, &'a u32)>) -> f64 {
+    let mut worst: f64 = 0.0;
+    for (&a, &b) in edges {
+        let l3 = d3(
+            mesh.position(p.vertex_ids[a as usize]),
+            mesh.position(p.vertex_ids[b as usize]),
+        );
+        if l3 > 0.0 {
+            worst = worst.max((d2(p.uv[a as usize], p.uv[b as usize]) - l3).abs() / l3);
+        }
+    }
+    worst
+}
+
+fn flips(p: &Piece) -> usize {
+    p.triangles
+        .iter()
+        .filter(|t| {
+            let [a, b, c] = t.map(|v| p.uv[v as usize]);
+            (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]) <= 0.0
+        })
+        .count()
+}
+
+/// Pairs of boundary segments with no shared vertex that properly cross (plain floating point).
+fn crossings(p: &Piece) -> usize {
+    let segs: Vec<(u32, u32)> = p
+        .boundary_loops
+        .iter()
+        .flat_map(|lp| (0..lp.len()).map(move |k| (lp[k], lp[(k + 1) % lp.len()])))
+        .collect();
+    let o = |a: [f64; 2], b: [f64; 2], c: [f64; 2]| {
+        ((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])).signum()
+    };
+    let mut n = 0;
+    for i in 0..segs.len() {
+        for j in i + 1..segs.len() {
+            let (s, t) = (segs[i], segs[j]);
+            if s.0 == t.0 || s.0 == t.1 || s.1 == t.0 || s.1 == t.1 {
+                continue;
+            }
+            let [a, b, c, d] = [s.0, s.1, t.0, t.1].map(|v| p.uv[v as usize]);
+            if o(a, b, c) * o(a, b, d) < 0.0 && o(c, d, a) * o(c, d, b) < 0.0 {
+                n += 1;
+            }
+        }
+    }
+    n
+}
+
+/// fl-mesh's output for `name`, from the cache or computed now.
+fn fl_meshed(name: &str, mesh: &Mesh, out: &Path) -> Option<(Mesh, bool)> {
+    let (obj, txt) = (
+        out.join(format!("{name}.fl.obj")),
+        out.join(format!("{name}.fl.txt")),
+    );
+    if let (Ok((m, _)), Ok(t)) = (flatmesh::io::load_path(&obj), std::fs::read_to_string(&txt)) {
+        return Some((m, t.trim() == "converged"));
+    }
+    let params = fl_mesh::Params::default();
+    match fl_mesh::solve(mesh, &params, &Silent::default()) {
+        Ok((m, _)) => {
+            let conv = corpus::max_flattenability(&m) <= params.tolerance;
+            let _ = std::fs::write(&obj, flatmesh::io::obj::write(&m.to_raw()));
+            let _ = std::fs::write(&txt, if conv { "converged" } else { "stalled" });
+            Some((m, conv))
+        }
+        Err(e) => {
+            println!("{name:<28} fl-mesh error: {e}");
+            None
+        }
+    }
+}
+
+fn main() {
+    let mut filter = String::new();
+    let mut params = serde_json::Map::new();
+    let (mut shared, mut fl, mut out) = (true, false, PathBuf::from("target/flatten_corpus"));
+    let mut shared_only = false;
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        match a.as_str() {
+            "--set" => {
+                let kv = args.next().expect("--set KEY=VALUE");
+                let (k, v) = kv.split_once('=').expect("KEY=VALUE");
+                let v = serde_json::from_str(v).unwrap_or(serde_json::Value::String(v.into()));
+                params.insert(k.into(), v);
+            }
+            "--no-shared" => shared = false,
+            "--shared-only" => shared_only = true,
+            "--fl-mesh" => fl = true,
+            "--out" => out = PathBuf::from(args.next().expect("--out DIR")),
+            _ => filter = a,
+        }
+    }
+    let params: flatten::Params = parse_params(&params).expect("parameters");
+    std::fs::create_dir_all(&out).expect("output directory");
+    println!(
+        "{:<28} {:<22} {:>6} {:>3} {:>3} {:>3} {:>5} {:>5} {:>2} {:>9} {:>9} {:>9} {:>6}",
+        "mesh",
+        "piece",
+        "faces",
+        "lp",
+        "cut",
+        "hol",
+        "flip",
+        "cross",
+        "S",
+        "edge err",
+        "bnd err",
+        "ϖ_max",
+        "s"
+    );
+    let generated: Vec<String> = corpus::procedural().iter().map(|p| p.name()).collect();
+    for case in corpus::cases(Path::new(corpus::SHARED_MESHES), shared) {
+        let made_here = case.name.starts_with("fixture-") || generated.contains(&case.name);
+        if !case.name.contains(&filter) || (shared_only && made_here) {
+            continue;
+        }
+        let Ok(mut mesh) = case.mesh() else {
+            continue;
+        };
+        let mut tag = "";
+        if fl {
+            let Some((m, conv)) = fl_meshed(&case.name, &mesh, &out) else {
+                continue;
+            };
+            mesh = m;
+            tag = if conv { "" } else { " [fl-mesh stalled]" };
+        }
+        let t = std::time::Instant::now();
+        let res = flatten::run(&mesh, &params, &Silent::default());
+        let secs = t.elapsed().as_secs_f64();
+        let res = match res {
+            Ok(r) => r,
+            Err(e) => {
+                println!("{:<28} error: {e}", case.name);
+                continue;
+            }
+        };
+        let pat = res.patterns.expect("patterns");
+        let _ = std::fs::write(
+            out.join(format!("{}.svg", case.name)),
+            flatmesh::io::pattern::to_svg(&pat),
+        );
+        for (k, p) in pat.pieces.iter().enumerate() {
+            let s = &res.summary["pieces"][k]["solver"];
+            let tri_edges = p
+                .triangles
+                .iter()
+                .flat_map(|t| [(&t[0], &t[1]), (&t[1], &t[2]), (&t[2], &t[0])]);
+            let bnd = p
+                .boundary_loops
+                .iter()
+                .flat_map(|lp| (0..lp.len()).map(move |i| (&lp[i], &lp[(i + 1) % lp.len()])));
+            println!(
+                "{:<28} {:<22} {:>6} {:>3} {:>3} {:>3} {:>5} {:>5} {:>2} {:>9.2e} {:>9.2e} {:>9.2e} {:>6.2}{tag}",
+                case.name,
+                p.patch.chars().take(22).collect::<String>(),
+                p.triangles.len(),
+                s["loops"],
+                s["real_cuts"],
+                s["holes"],
+                flips(p),
+                crossings(p),
+                p.measures["overlap"],
+                edge_error(&mesh, p, tri_edges),
+                edge_error(&mesh, p, bnd),
+                p.measures["varpi_max"].as_f64().unwrap_or(f64::NAN),
+                secs
+            );
+        }
+        for w in res.summary["job_warnings"].as_array().into_iter().flatten() {
+            println!("{:<28}   warning: {}", case.name, w.as_str().unwrap_or(""));
+        }
+    }
+}
