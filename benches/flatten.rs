@@ -1,17 +1,22 @@
-//! `flatten` end to end (pieces, LPFB, interior Cholesky, measures, seams) on noisy
-//! half-cylinder patches of 50k and 200k faces and on ../shared/meshes/classic/bff_face.obj.
-//! Peers on this kind of machine (issue 4): Boundary First Flattening 0.27 s at 50k faces and
-//! 2.1 s at 200k; libigl LSCM ≈ 1.0 s and CGAL LSCM ≈ 0.5 s at 50k.
+//! `flatten` end to end (pieces, real cuts, LPFB, interior Cholesky, measures, seams) on noisy
+//! half-cylinder patches of 50k and 200k faces, a noisy 50k-face tube (cut open, issue 13) and
+//! ../shared/meshes/classic/bff_face.obj, with the harmonic interior (the paper), the ARAP
+//! interior and LSCM. Before timing, each prints its area distortion measured here from the
+//! pattern: area-weighted mean |ln(A2D/A3D)| and the range of A2D/A3D over triangles.
+//! Peers on this kind of machine (issues 4, 13): Boundary First Flattening 0.27 s at 50k faces
+//! and 2.1 s at 200k, mean |ln(A2D/A3D)| 0.0053 at 50k, A2D/A3D in 0.85–1.09 at 200k; libigl
+//! LSCM ≈ 1.0 s and CGAL LSCM ≈ 0.5 s at 50k.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use flatmesh::algorithms::flatten::{self, Method, Params};
+use flatmesh::algorithms::flatten::{self, param::Interior, Method, Params};
 use flatmesh::algorithms::Silent;
 use flatmesh::mesh::{Mesh, RawMesh};
 
 /// Half cylinder (radius 0.5 m, height 1 m) on an n×n grid, 2(n−1)² faces, every vertex moved
 /// radially by uniform noise of ±0.2 % of the radius (a deterministic LCG), so the patch is
-/// nearly but not exactly developable, with a noisy boundary.
-fn noisy_half_cylinder(n: usize) -> Mesh {
+/// nearly but not exactly developable, with a noisy boundary. With `tube`, the whole
+/// cylinder: column n−1 joins column 0, 2n(n−1) faces.
+fn noisy_cylinder(n: usize, tube: bool) -> Mesh {
     let mut state: u64 = 0x9E37_79B9_7F4A_7C15;
     let mut rnd = || {
         state = state
@@ -22,16 +27,21 @@ fn noisy_half_cylinder(n: usize) -> Mesh {
     let mut positions = Vec::with_capacity(n * n);
     for j in 0..n {
         for i in 0..n {
-            let t = std::f64::consts::PI * i as f64 / (n - 1) as f64;
+            let t = if tube {
+                std::f64::consts::TAU * i as f64 / n as f64
+            } else {
+                std::f64::consts::PI * i as f64 / (n - 1) as f64
+            };
             let r = 0.5 * (1.0 + 0.004 * rnd());
             positions.push([r * t.cos(), r * t.sin(), j as f64 / (n - 1) as f64]);
         }
     }
     let mut triangles = Vec::with_capacity(2 * (n - 1) * (n - 1));
+    let cols = if tube { n } else { n - 1 };
     for j in 0..n - 1 {
-        for i in 0..n - 1 {
-            let a = (j * n + i) as u32;
-            let (b, c, d) = (a + 1, a + n as u32, a + n as u32 + 1);
+        for i in 0..cols {
+            let id = |i: usize, j: usize| (j * n + i % n) as u32;
+            let (a, b, c, d) = (id(i, j), id(i + 1, j), id(i, j + 1), id(i + 1, j + 1));
             triangles.push([a, b, d]);
             triangles.push([a, d, c]);
         }
@@ -48,30 +58,69 @@ fn noisy_half_cylinder(n: usize) -> Mesh {
     .0
 }
 
+/// Area-weighted mean |ln(A2D/A3D)| and the range of A2D/A3D over the triangles of a pattern.
+fn area_distortion(mesh: &Mesh, pat: &flatmesh::pattern::Patterns) -> (f64, f64, f64) {
+    let (mut sum, mut wsum, mut lo, mut hi) = (0.0, 0.0, f64::MAX, f64::MIN);
+    for p in &pat.pieces {
+        for t in &p.triangles {
+            let [a, b, c] = t.map(|v| p.uv[v as usize]);
+            let a2 = 0.5 * ((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]));
+            let [x, y, z] = t.map(|v| mesh.position(p.vertex_ids[v as usize]));
+            let (u, v) = (
+                [y[0] - x[0], y[1] - x[1], y[2] - x[2]],
+                [z[0] - x[0], z[1] - x[1], z[2] - x[2]],
+            );
+            let n = [
+                u[1] * v[2] - u[2] * v[1],
+                u[2] * v[0] - u[0] * v[2],
+                u[0] * v[1] - u[1] * v[0],
+            ];
+            let a3 = 0.5 * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+            let r = a2 / a3;
+            sum += a3 * r.abs().ln().abs();
+            wsum += a3;
+            lo = lo.min(r);
+            hi = hi.max(r);
+        }
+    }
+    (sum / wsum, lo, hi)
+}
+
 fn bench(c: &mut Criterion) {
     let mut g = c.benchmark_group("flatten");
     g.sample_size(10);
     let mut cases: Vec<(String, Mesh)> = [159usize, 317]
         .iter()
         .map(|&n| {
-            let m = noisy_half_cylinder(n);
+            let m = noisy_cylinder(n, false);
             (format!("half_cylinder_{}", m.num_faces()), m)
         })
         .collect();
+    let tube = noisy_cylinder(159, true);
+    cases.push((format!("tube_{}", tube.num_faces()), tube));
     match flatmesh::io::load_path(std::path::Path::new(
         "../shared/meshes/classic/bff_face.obj",
     )) {
         Ok((m, _)) => cases.push(("bff_face_34144".into(), m)),
         Err(_) => println!("skipping bff_face: ../shared not present"),
     }
+    let configs = [
+        ("lpfb", Method::Lpfb, Interior::Harmonic),
+        ("lpfb_arap", Method::Lpfb, Interior::Arap),
+        ("lscm", Method::Lscm, Interior::Harmonic),
+    ];
     for (name, mesh) in &cases {
         g.throughput(Throughput::Elements(mesh.num_faces() as u64));
-        for method in [Method::Lpfb, Method::Lscm] {
+        for (label, method, interior) in configs {
             let params = Params {
                 method,
+                interior,
                 ..Params::default()
             };
-            let id = BenchmarkId::new(format!("{method:?}").to_lowercase(), name);
+            let o = flatten::run(mesh, &params, &Silent::default()).unwrap();
+            let (mean, lo, hi) = area_distortion(mesh, o.patterns.as_ref().unwrap());
+            println!("{name} {label}: mean |ln(A2D/A3D)| {mean:.5}, A2D/A3D in {lo:.3}–{hi:.3}");
+            let id = BenchmarkId::new(label, name);
             g.bench_with_input(id, mesh, |b, mesh| {
                 b.iter(|| {
                     let o = flatten::run(mesh, &params, &Silent::default()).unwrap();

@@ -570,3 +570,90 @@ fn a_torus_is_refused_by_name() {
         "{e}"
     );
 }
+
+/// Area-weighted mean |ln(A2D/A3D)| of a pattern.
+fn mean_log_area(mesh: &Mesh, pat: &Patterns) -> f64 {
+    let (mut sum, mut wsum) = (0.0, 0.0);
+    for p in &pat.pieces {
+        for &t in &p.triangles {
+            let [a, b, c] = t.map(|v| mesh.position(p.vertex_ids[v as usize]));
+            let (u, v) = (
+                [b[0] - a[0], b[1] - a[1], b[2] - a[2]],
+                [c[0] - a[0], c[1] - a[1], c[2] - a[2]],
+            );
+            let n = [
+                u[1] * v[2] - u[2] * v[1],
+                u[2] * v[0] - u[0] * v[2],
+                u[0] * v[1] - u[1] * v[0],
+            ];
+            let a3 = 0.5 * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+            sum += a3 * (signed_area(p, t) / a3).abs().ln().abs();
+            wsum += a3;
+        }
+    }
+    sum / wsum
+}
+
+/// The ARAP interior keeps an isometry isometric, keeps the boundary exact, and on a noisy
+/// half-cylinder (radial noise ±0.2 % of the radius, as benches/flatten.rs) spreads the area
+/// more evenly than the harmonic interior.
+#[test]
+fn arap_interior_is_exact_when_it_can_be_and_lowers_area_distortion() {
+    let arap = Params {
+        interior: flatten::param::Interior::Arap,
+        ..Params::default()
+    };
+    let mut b = Builder::default();
+    frustum(&mut b, 40, 12, (0.5, 0.2, 0.6), |_, _| false);
+    let mesh = b.mesh(&["cone"]);
+    check_exact("frustum, arap", &mesh, &run(&mesh, &arap).0);
+
+    let mut state: u64 = 7;
+    let mut rnd = || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+    };
+    let n = 60;
+    let mut b = Builder::default();
+    let mut p = vec![[0.0; 3]; n * n];
+    for j in 0..n {
+        for i in 0..n {
+            let t = PI * i as f64 / (n - 1) as f64;
+            let r = 0.5 * (1.0 + 0.004 * rnd());
+            p[j * n + i] = [r * t.cos(), r * t.sin(), j as f64 / (n - 1) as f64];
+        }
+    }
+    for j in 0..n - 1 {
+        for i in 0..n - 1 {
+            let q = [
+                p[j * n + i],
+                p[j * n + i + 1],
+                p[(j + 1) * n + i + 1],
+                p[(j + 1) * n + i],
+            ];
+            b.quad(q, true, 0);
+        }
+    }
+    let mesh = b.mesh(&["half cylinder"]);
+    let (harmonic, _) = run(&mesh, &Params::default());
+    let (rigid, _) = run(&mesh, &arap);
+    let (h, r) = (
+        mean_log_area(&mesh, &harmonic),
+        mean_log_area(&mesh, &rigid),
+    );
+    println!("noisy half-cylinder: mean |ln(A2D/A3D)| harmonic {h:.5}, arap {r:.5}");
+    assert!(r < h);
+    for pat in [&harmonic, &rigid] {
+        let p = &pat.pieces[0];
+        assert!(boundary_error(&mesh, p) <= 1e-9);
+        assert_eq!(
+            p.triangles
+                .iter()
+                .filter(|&&t| signed_area(p, t) <= 0.0)
+                .count(),
+            0
+        );
+    }
+}

@@ -163,6 +163,9 @@ pub struct Params {
     /// How inner boundary loops are treated: `auto` (default), `virtual`, `real`.
     #[serde(default)]
     pub cuts: cut::Cuts,
+    /// Interior solve after LPFB: `harmonic` (default, the paper's Eq. 15–18) or `arap`.
+    #[serde(default)]
+    pub interior: param::Interior,
     /// Curvature (radians) a hole may enclose and still stay closed in the plane, and above
     /// which a vertex of a closed piece counts as curved (1e-3).
     #[serde(default = "default_curvature_tolerance")]
@@ -185,6 +188,7 @@ impl Default for Params {
             unit: Unit::Mm,
             input_unit: InputUnit::Auto,
             cuts: cut::Cuts::Auto,
+            interior: param::Interior::Harmonic,
             curvature_tolerance: default_curvature_tolerance(),
             max_iterations: default_max_iterations(),
             tolerance: default_tolerance(),
@@ -450,7 +454,11 @@ pub fn flatten_piece(
             let fixed = lpfb_boundary(p, params, control, &mut info)?;
             info.seconds_lpfb = t0.elapsed().as_secs_f64();
             let t1 = Instant::now();
-            let uv = param::harmonic_fill(&p.pos, &p.tris, &fixed).map_err(err)?;
+            let uv = match params.interior {
+                param::Interior::Harmonic => param::harmonic_fill(&p.pos, &p.tris, &fixed),
+                param::Interior::Arap => param::arap_fill(&p.pos, &p.tris, &fixed),
+            }
+            .map_err(err)?;
             info.seconds_param = t1.elapsed().as_secs_f64();
             uv
         }

@@ -7,7 +7,7 @@
 //! Cholesky and both coordinates are solved with that one factor.
 
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
-use faer::sparse::linalg::cholesky::factorize_symbolic_cholesky;
+use faer::sparse::linalg::cholesky::{factorize_symbolic_cholesky, LltRef, SymbolicCholesky};
 use faer::sparse::{SparseColMat, Triplet};
 use faer::{Conj, Mat, Par, Side};
 
@@ -37,34 +37,36 @@ pub fn half_cots(pos: &[[f64; 3]], tris: &[[u32; 3]]) -> Vec<[f64; 3]> {
         .collect()
 }
 
-/// Solve A X = rhs in place for a symmetric positive-definite A given by its lower triangle
-/// (duplicates summed): one symbolic and one numeric Cholesky, every column of `rhs` solved
-/// with that one factor. Sequential: pieces already run in parallel, and on two cores faer's
-/// own threads were no faster (../shared/CRATES.md); its high-level solve, run from inside a
-/// rayon task, took longer than the factorisation.
-fn spd_solve(
-    n: usize,
-    trip: &[Triplet<usize, usize, f64>],
-    rhs: &mut Mat<f64>,
-) -> Result<(), String> {
-    let a = SparseColMat::<usize, f64>::try_new_from_triplets(n, n, trip)
-        .map_err(|e| format!("sparse assembly failed: {e:?}"))?;
-    let sym = factorize_symbolic_cholesky(
-        a.symbolic(),
-        Side::Lower,
-        Default::default(),
-        Default::default(),
-    )
-    .map_err(|e| format!("symbolic Cholesky failed: {e:?}"))?;
-    let par = Par::Seq;
-    let mut buf = MemBuffer::try_new(StackReq::any_of(&[
-        sym.factorize_numeric_llt_scratch::<f64>(par, Default::default()),
-        sym.solve_in_place_scratch::<f64>(rhs.ncols(), par),
-    ]))
-    .map_err(|e| format!("out of memory for the Cholesky factor: {e:?}"))?;
-    let mut values = vec![0.0f64; sym.len_val()];
-    let llt = sym
-        .factorize_numeric_llt(
+/// A sparse Cholesky factor of a symmetric positive-definite matrix given by its lower
+/// triangle (duplicates summed), kept so that several right-hand sides can be solved one after
+/// another (the ARAP global steps) with one factorisation. Sequential: pieces already run in
+/// parallel, and on two cores faer's own threads were no faster (../shared/CRATES.md); its
+/// high-level solve, run from inside a rayon task, took longer than the factorisation.
+struct SpdFactor {
+    sym: SymbolicCholesky<usize>,
+    values: Vec<f64>,
+    buf: MemBuffer,
+}
+
+impl SpdFactor {
+    fn new(n: usize, trip: &[Triplet<usize, usize, f64>], ncols: usize) -> Result<Self, String> {
+        let a = SparseColMat::<usize, f64>::try_new_from_triplets(n, n, trip)
+            .map_err(|e| format!("sparse assembly failed: {e:?}"))?;
+        let sym = factorize_symbolic_cholesky(
+            a.symbolic(),
+            Side::Lower,
+            Default::default(),
+            Default::default(),
+        )
+        .map_err(|e| format!("symbolic Cholesky failed: {e:?}"))?;
+        let par = Par::Seq;
+        let mut buf = MemBuffer::try_new(StackReq::any_of(&[
+            sym.factorize_numeric_llt_scratch::<f64>(par, Default::default()),
+            sym.solve_in_place_scratch::<f64>(ncols, par),
+        ]))
+        .map_err(|e| format!("out of memory for the Cholesky factor: {e:?}"))?;
+        let mut values = vec![0.0f64; sym.len_val()];
+        sym.factorize_numeric_llt(
             &mut values,
             a.as_ref(),
             Side::Lower,
@@ -76,8 +78,38 @@ fn spd_solve(
         .map_err(|e| {
             format!("Cholesky failed ({e:?}): the cotangent system is not positive definite")
         })?;
-    llt.solve_in_place_with_conj(Conj::No, rhs.as_mut(), par, MemStack::new(&mut buf));
+        Ok(SpdFactor { sym, values, buf })
+    }
+
+    fn solve(&mut self, rhs: &mut Mat<f64>) {
+        LltRef::new(&self.sym, &self.values).solve_in_place_with_conj(
+            Conj::No,
+            rhs.as_mut(),
+            Par::Seq,
+            MemStack::new(&mut self.buf),
+        );
+    }
+}
+
+/// Solve A X = rhs in place (see [`SpdFactor`]).
+fn spd_solve(
+    n: usize,
+    trip: &[Triplet<usize, usize, f64>],
+    rhs: &mut Mat<f64>,
+) -> Result<(), String> {
+    SpdFactor::new(n, trip, rhs.ncols())?.solve(rhs);
     Ok(())
+}
+
+/// The interior solve after LPFB.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Interior {
+    /// Cotangent-harmonic with the boundary fixed (Eq. 15–18, the paper).
+    #[default]
+    Harmonic,
+    /// That, then as-rigid-as-possible local/global steps with the boundary still fixed.
+    Arap,
 }
 
 /// Eq. 15–18: planar positions of all vertices, the `fixed` ones kept where they are and the
@@ -86,6 +118,72 @@ pub fn harmonic_fill(
     pos: &[[f64; 3]],
     tris: &[[u32; 3]],
     fixed: &[Option<[f64; 2]>],
+) -> Result<Vec<[f64; 2]>, String> {
+    fill(pos, tris, fixed, 0)
+}
+
+/// Most ARAP local/global iterations of [`arap_fill`].
+pub const ARAP_ITERATIONS: usize = 20;
+
+/// [`harmonic_fill`], then up to [`ARAP_ITERATIONS`] as-rigid-as-possible iterations (Liu et
+/// al. 2008, "A local/global approach to mesh parameterization") with the boundary still
+/// fixed: the local step fits to each triangle the rotation closest to its map, the global
+/// step solves the same cotangent system as Eq. 17 with the rotated 3D edges on the right, so
+/// the one factorisation serves every iteration. Stops when the ARAP energy falls by less
+/// than 1e-4 relative. The harmonic map is returned instead when ARAP would flip more
+/// triangles than it.
+pub fn arap_fill(
+    pos: &[[f64; 3]],
+    tris: &[[u32; 3]],
+    fixed: &[Option<[f64; 2]>],
+) -> Result<Vec<[f64; 2]>, String> {
+    fill(pos, tris, fixed, ARAP_ITERATIONS)
+}
+
+/// Each triangle laid flat by its 3D edge lengths: corner 0 at the origin, corner 1 on +x.
+fn local_frames(pos: &[[f64; 3]], tris: &[[u32; 3]]) -> Vec<[[f64; 2]; 3]> {
+    tris.iter()
+        .map(|t| {
+            let p = t.map(|v| pos[v as usize]);
+            let e1 = [p[1][0] - p[0][0], p[1][1] - p[0][1], p[1][2] - p[0][2]];
+            let e2 = [p[2][0] - p[0][0], p[2][1] - p[0][1], p[2][2] - p[0][2]];
+            let l1 = (e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2]).sqrt();
+            let x = if l1 > 0.0 {
+                e1.map(|c| c / l1)
+            } else {
+                [1.0, 0.0, 0.0]
+            };
+            let px = e2[0] * x[0] + e2[1] * x[1] + e2[2] * x[2];
+            let l2sq = e2[0] * e2[0] + e2[1] * e2[1] + e2[2] * e2[2];
+            [
+                [0.0, 0.0],
+                [l1, 0.0],
+                [px, (l2sq - px * px).max(0.0).sqrt()],
+            ]
+        })
+        .collect()
+}
+
+fn flipped(uv: &[[f64; 2]], tris: &[[u32; 3]]) -> usize {
+    tris.iter()
+        .filter(|t| {
+            let [a, b, c] = t.map(|v| uv[v as usize]);
+            (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]) <= 0.0
+        })
+        .count()
+}
+
+/// Edge (a, b) of triangle corner i: the edge opposite corner i, whose weight is w[i].
+#[inline]
+fn opposite(i: usize) -> (usize, usize) {
+    ((i + 1) % 3, (i + 2) % 3)
+}
+
+fn fill(
+    pos: &[[f64; 3]],
+    tris: &[[u32; 3]],
+    fixed: &[Option<[f64; 2]>],
+    arap_iterations: usize,
 ) -> Result<Vec<[f64; 2]>, String> {
     let nv = pos.len();
     let mut free_id = vec![usize::MAX; nv];
@@ -102,13 +200,14 @@ pub fn harmonic_fill(
     }
     let w = half_cots(pos, tris);
     // lower triangle only (the factorisation reads Side::Lower); the diagonal is summed here
-    // so the triplet list holds about one entry per edge and face
+    // so the triplet list holds about one entry per edge and face. `base` is the right-hand
+    // side from the fixed vertices, the same for every solve.
     let mut trip = Vec::with_capacity(tris.len() * 3 + nf);
     let mut diag = vec![0.0; nf];
-    let mut rhs = Mat::<f64>::zeros(nf, 2);
+    let mut base = Mat::<f64>::zeros(nf, 2);
     for (t, wt) in tris.iter().zip(&w) {
         for i in 0..3 {
-            let (a, b) = (t[(i + 1) % 3] as usize, t[(i + 2) % 3] as usize);
+            let (a, b) = (t[opposite(i).0] as usize, t[opposite(i).1] as usize);
             let wij = wt[i];
             let (fa, fb) = (free_id[a], free_id[b]);
             for (fp, q) in [(fa, b), (fb, a)] {
@@ -118,8 +217,8 @@ pub fn harmonic_fill(
                 diag[fp] += wij;
                 if free_id[q] == usize::MAX {
                     let u = fixed[q].unwrap_or([0.0, 0.0]);
-                    rhs[(fp, 0)] += wij * u[0];
-                    rhs[(fp, 1)] += wij * u[1];
+                    base[(fp, 0)] += wij * u[0];
+                    base[(fp, 1)] += wij * u[1];
                 }
             }
             if fa != usize::MAX && fb != usize::MAX {
@@ -128,17 +227,110 @@ pub fn harmonic_fill(
         }
     }
     trip.extend(diag.iter().enumerate().map(|(i, &d)| Triplet::new(i, i, d)));
-    spd_solve(nf, &trip, &mut rhs)?;
-    for v in 0..nv {
-        let f = free_id[v];
-        if f != usize::MAX {
-            uv[v] = [rhs[(f, 0)], rhs[(f, 1)]];
+    let mut factor = SpdFactor::new(nf, &trip, 2)?;
+    let mut rhs = base.clone();
+    factor.solve(&mut rhs);
+    let scatter = |rhs: &Mat<f64>, uv: &mut [[f64; 2]]| {
+        for v in 0..nv {
+            let f = free_id[v];
+            if f != usize::MAX {
+                uv[v] = [rhs[(f, 0)], rhs[(f, 1)]];
+            }
+        }
+    };
+    scatter(&rhs, &mut uv);
+    if arap_iterations > 0 {
+        let arap = arap_steps(
+            tris,
+            &w,
+            &local_frames(pos, tris),
+            &free_id,
+            &base,
+            &mut factor,
+            &uv,
+            arap_iterations,
+        );
+        if arap.iter().all(|p| p[0].is_finite() && p[1].is_finite())
+            && flipped(&arap, tris) <= flipped(&uv, tris)
+        {
+            uv = arap;
         }
     }
     if uv.iter().any(|p| !p[0].is_finite() || !p[1].is_finite()) {
         return Err("the interior solve produced a non-finite position".into());
     }
     Ok(uv)
+}
+
+/// ARAP local/global iterations from `start` (see [`arap_fill`]).
+// i runs over a triangle's corners and indexes its weights, frame and vertices alike
+#[allow(clippy::too_many_arguments, clippy::needless_range_loop)]
+fn arap_steps(
+    tris: &[[u32; 3]],
+    w: &[[f64; 3]],
+    frames: &[[[f64; 2]; 3]],
+    free_id: &[usize],
+    base: &Mat<f64>,
+    factor: &mut SpdFactor,
+    start: &[[f64; 2]],
+    iterations: usize,
+) -> Vec<[f64; 2]> {
+    let mut uv = start.to_vec();
+    let mut rot = vec![[1.0, 0.0]; tris.len()]; // (cos, sin) per triangle
+    let mut last = f64::INFINITY;
+    let rotate = |r: [f64; 2], d: [f64; 2]| [r[0] * d[0] - r[1] * d[1], r[1] * d[0] + r[0] * d[1]];
+    for it in 0..iterations {
+        // local step: per triangle the rotation R maximising tr(Rᵀ S), S = Σ_edges
+        // w (u_a − u_b)(x_a − x_b)ᵀ; the energy is measured with the previous rotations
+        let mut energy = 0.0;
+        for (k, (t, wt)) in tris.iter().zip(w).enumerate() {
+            let x = frames[k];
+            let mut s = [0.0; 4];
+            for i in 0..3 {
+                let (a, b) = opposite(i);
+                let du = [
+                    uv[t[a] as usize][0] - uv[t[b] as usize][0],
+                    uv[t[a] as usize][1] - uv[t[b] as usize][1],
+                ];
+                let dx = [x[a][0] - x[b][0], x[a][1] - x[b][1]];
+                s[0] += wt[i] * du[0] * dx[0];
+                s[1] += wt[i] * du[0] * dx[1];
+                s[2] += wt[i] * du[1] * dx[0];
+                s[3] += wt[i] * du[1] * dx[1];
+                let r = rotate(rot[k], dx);
+                energy += wt[i] * ((du[0] - r[0]).powi(2) + (du[1] - r[1]).powi(2));
+            }
+            let th = (s[2] - s[1]).atan2(s[0] + s[3]);
+            rot[k] = [th.cos(), th.sin()];
+        }
+        if it > 0 && (energy.is_nan() || energy >= last * (1.0 - 1e-4)) {
+            break;
+        }
+        last = energy;
+        // global step: L u = base + Σ_t Σ_edges w R_t (x_a − x_b) on the free rows
+        let mut rhs = base.clone();
+        for (k, (t, wt)) in tris.iter().zip(w).enumerate() {
+            let x = frames[k];
+            for i in 0..3 {
+                let (a, b) = opposite(i);
+                let r = rotate(rot[k], [x[a][0] - x[b][0], x[a][1] - x[b][1]]);
+                for (v, sign) in [(t[a], 1.0), (t[b], -1.0)] {
+                    let f = free_id[v as usize];
+                    if f != usize::MAX {
+                        rhs[(f, 0)] += sign * wt[i] * r[0];
+                        rhs[(f, 1)] += sign * wt[i] * r[1];
+                    }
+                }
+            }
+        }
+        factor.solve(&mut rhs);
+        for (v, &f) in free_id.iter().enumerate() {
+            if f != usize::MAX {
+                uv[v] = [rhs[(f, 0)], rhs[(f, 1)]];
+            }
+        }
+    }
+    uv
 }
 
 /// Least-squares conformal map with a free boundary (Lévy et al. 2002), written as the
