@@ -10,6 +10,7 @@
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use flatmesh::algorithms::flatten::{self, param::Interior, Method, Params};
 use flatmesh::algorithms::Silent;
+use flatmesh::corpus::pattern_checks::area_distortion;
 use flatmesh::mesh::{Mesh, RawMesh};
 
 /// Half cylinder (radius 0.5 m, height 1 m) on an n×n grid, 2(n−1)² faces, every vertex moved
@@ -58,34 +59,6 @@ fn noisy_cylinder(n: usize, tube: bool) -> Mesh {
     .0
 }
 
-/// Area-weighted mean |ln(A2D/A3D)| and the range of A2D/A3D over the triangles of a pattern.
-fn area_distortion(mesh: &Mesh, pat: &flatmesh::pattern::Patterns) -> (f64, f64, f64) {
-    let (mut sum, mut wsum, mut lo, mut hi) = (0.0, 0.0, f64::MAX, f64::MIN);
-    for p in &pat.pieces {
-        for t in &p.triangles {
-            let [a, b, c] = t.map(|v| p.uv[v as usize]);
-            let a2 = 0.5 * ((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]));
-            let [x, y, z] = t.map(|v| mesh.position(p.vertex_ids[v as usize]));
-            let (u, v) = (
-                [y[0] - x[0], y[1] - x[1], y[2] - x[2]],
-                [z[0] - x[0], z[1] - x[1], z[2] - x[2]],
-            );
-            let n = [
-                u[1] * v[2] - u[2] * v[1],
-                u[2] * v[0] - u[0] * v[2],
-                u[0] * v[1] - u[1] * v[0],
-            ];
-            let a3 = 0.5 * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-            let r = a2 / a3;
-            sum += a3 * r.abs().ln().abs();
-            wsum += a3;
-            lo = lo.min(r);
-            hi = hi.max(r);
-        }
-    }
-    (sum / wsum, lo, hi)
-}
-
 fn bench(c: &mut Criterion) {
     let mut g = c.benchmark_group("flatten");
     g.sample_size(10);
@@ -118,7 +91,7 @@ fn bench(c: &mut Criterion) {
                 ..Params::default()
             };
             let o = flatten::run(mesh, &params, &Silent::default()).unwrap();
-            let (mean, lo, hi) = area_distortion(mesh, o.patterns.as_ref().unwrap());
+            let (mean, lo, hi) = area_distortion(mesh, &o.patterns.as_ref().unwrap().pieces);
             println!("{name} {label}: mean |ln(A2D/A3D)| {mean:.5}, A2D/A3D in {lo:.3}–{hi:.3}");
             let id = BenchmarkId::new(label, name);
             g.bench_with_input(id, mesh, |b, mesh| {

@@ -11,73 +11,17 @@
 //! to target/flatten_corpus).
 //!
 //! Columns: faces, boundary loops as given, real cuts, holes kept, flipped triangles (signed
-//! area ≤ 0), boundary crossings (every pair of boundary segments), S(Ω), largest relative
+//! area ≤ 0), boundary crossings and touchings (every pair of boundary segments), S(Ω), largest relative
 //! edge-length error over all triangle edges (2D against 3D: the stretch an isometry would
 //! not have), largest relative boundary-edge error, ϖ_max of the piece's interior.
 
 use flatmesh::algorithms::{fl_mesh, flatten, parse_params, Silent};
 use flatmesh::corpus;
+use flatmesh::corpus::pattern_checks::{
+    boundary_crossings, boundary_length_error, edge_length_error, flipped,
+};
 use flatmesh::mesh::Mesh;
-use flatmesh::pattern::Piece;
 use std::path::{Path, PathBuf};
-
-fn d2(a: [f64; 2], b: [f64; 2]) -> f64 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt()
-}
-
-fn d3(a: [f64; 3], b: [f64; 3]) -> f64 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
-}
-
-fn edge_error<'a>(mesh: &Mesh, p: &Piece, edges: impl Iterator<Item = (&'a u32, &'a u32)>) -> f64 {
-    let mut worst: f64 = 0.0;
-    for (&a, &b) in edges {
-        let l3 = d3(
-            mesh.position(p.vertex_ids[a as usize]),
-            mesh.position(p.vertex_ids[b as usize]),
-        );
-        if l3 > 0.0 {
-            worst = worst.max((d2(p.uv[a as usize], p.uv[b as usize]) - l3).abs() / l3);
-        }
-    }
-    worst
-}
-
-fn flips(p: &Piece) -> usize {
-    p.triangles
-        .iter()
-        .filter(|t| {
-            let [a, b, c] = t.map(|v| p.uv[v as usize]);
-            (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]) <= 0.0
-        })
-        .count()
-}
-
-/// Pairs of boundary segments with no shared vertex that properly cross (plain floating point).
-fn crossings(p: &Piece) -> usize {
-    let segs: Vec<(u32, u32)> = p
-        .boundary_loops
-        .iter()
-        .flat_map(|lp| (0..lp.len()).map(move |k| (lp[k], lp[(k + 1) % lp.len()])))
-        .collect();
-    let o = |a: [f64; 2], b: [f64; 2], c: [f64; 2]| {
-        ((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])).signum()
-    };
-    let mut n = 0;
-    for i in 0..segs.len() {
-        for j in i + 1..segs.len() {
-            let (s, t) = (segs[i], segs[j]);
-            if s.0 == t.0 || s.0 == t.1 || s.1 == t.0 || s.1 == t.1 {
-                continue;
-            }
-            let [a, b, c, d] = [s.0, s.1, t.0, t.1].map(|v| p.uv[v as usize]);
-            if o(a, b, c) * o(a, b, d) < 0.0 && o(c, d, a) * o(c, d, b) < 0.0 {
-                n += 1;
-            }
-        }
-    }
-    n
-}
 
 /// fl-mesh's output for `name`, from the cache or computed now.
 fn fl_meshed(name: &str, mesh: &Mesh, out: &Path) -> Option<(Mesh, bool)> {
@@ -176,14 +120,6 @@ fn main() {
         );
         for (k, p) in pat.pieces.iter().enumerate() {
             let s = &res.summary["pieces"][k]["solver"];
-            let tri_edges = p
-                .triangles
-                .iter()
-                .flat_map(|t| [(&t[0], &t[1]), (&t[1], &t[2]), (&t[2], &t[0])]);
-            let bnd = p
-                .boundary_loops
-                .iter()
-                .flat_map(|lp| (0..lp.len()).map(move |i| (&lp[i], &lp[(i + 1) % lp.len()])));
             println!(
                 "{:<28} {:<22} {:>6} {:>3} {:>3} {:>3} {:>5} {:>5} {:>2} {:>9.2e} {:>9.2e} {:>9.2e} {:>6.2}{tag}",
                 case.name,
@@ -192,11 +128,11 @@ fn main() {
                 s["loops"],
                 s["real_cuts"],
                 s["holes"],
-                flips(p),
-                crossings(p),
+                flipped(p),
+                boundary_crossings(p),
                 p.measures["overlap"],
-                edge_error(&mesh, p, tri_edges),
-                edge_error(&mesh, p, bnd),
+                edge_length_error(&mesh, p),
+                boundary_length_error(&mesh, p),
                 p.measures["varpi_max"].as_f64().unwrap_or(f64::NAN),
                 secs
             );

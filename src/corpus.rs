@@ -440,3 +440,144 @@ pub fn print_table(
     }
     println!("{conv} of {total} reached ϖ_max ≤ {:e}", params.tolerance);
 }
+
+/// Figures of a flat pattern recomputed from its 2D and 3D positions alone, for tests,
+/// examples and benchmarks to judge patterns without the flatten module's own measures.
+pub mod pattern_checks {
+    use crate::mesh::Mesh;
+    use crate::pattern::Piece;
+
+    fn d2(a: [f64; 2], b: [f64; 2]) -> f64 {
+        ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt()
+    }
+
+    fn d3(a: [f64; 3], b: [f64; 3]) -> f64 {
+        ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+    }
+
+    /// Signed 2D area of triangle `t` of a piece.
+    pub fn signed_area(p: &Piece, t: [u32; 3]) -> f64 {
+        let [a, b, c] = t.map(|v| p.uv[v as usize]);
+        0.5 * ((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
+    }
+
+    /// 3D area of triangle `t` of a piece.
+    pub fn area_3d(mesh: &Mesh, p: &Piece, t: [u32; 3]) -> f64 {
+        let [a, b, c] = t.map(|v| mesh.position(p.vertex_ids[v as usize]));
+        let (u, v) = (
+            [b[0] - a[0], b[1] - a[1], b[2] - a[2]],
+            [c[0] - a[0], c[1] - a[1], c[2] - a[2]],
+        );
+        let n = [
+            u[1] * v[2] - u[2] * v[1],
+            u[2] * v[0] - u[0] * v[2],
+            u[0] * v[1] - u[1] * v[0],
+        ];
+        0.5 * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt()
+    }
+
+    /// Triangles with signed 2D area ≤ 0.
+    pub fn flipped(p: &Piece) -> usize {
+        p.triangles
+            .iter()
+            .filter(|&&t| signed_area(p, t) <= 0.0)
+            .count()
+    }
+
+    fn worst_edge(mesh: &Mesh, p: &Piece, edges: impl Iterator<Item = (u32, u32)>) -> f64 {
+        let mut worst: f64 = 0.0;
+        for (a, b) in edges {
+            let l3 = d3(
+                mesh.position(p.vertex_ids[a as usize]),
+                mesh.position(p.vertex_ids[b as usize]),
+            );
+            if l3 > 0.0 {
+                worst = worst.max((d2(p.uv[a as usize], p.uv[b as usize]) - l3).abs() / l3);
+            }
+        }
+        worst
+    }
+
+    /// Largest relative difference between a triangle edge in 2D and in 3D: 0 for an
+    /// isometry, and a bound on the stretch of every triangle's edges.
+    pub fn edge_length_error(mesh: &Mesh, p: &Piece) -> f64 {
+        let edges = p
+            .triangles
+            .iter()
+            .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])]);
+        worst_edge(mesh, p, edges)
+    }
+
+    /// Largest relative difference of a boundary edge, 2D against 3D.
+    pub fn boundary_length_error(mesh: &Mesh, p: &Piece) -> f64 {
+        let edges = p
+            .boundary_loops
+            .iter()
+            .flat_map(|lp| (0..lp.len()).map(move |k| (lp[k], lp[(k + 1) % lp.len()])));
+        worst_edge(mesh, p, edges)
+    }
+
+    /// Pairs of boundary segments sharing no vertex that cross or touch, by brute force.
+    /// Orientations within 1e-12 of the squared segment length count as collinear, so two
+    /// pieces of one straight side (a rectangle's) do not count, but a slit whose two sides
+    /// lie on each other does.
+    pub fn boundary_crossings(p: &Piece) -> usize {
+        let segs: Vec<(u32, u32)> = p
+            .boundary_loops
+            .iter()
+            .flat_map(|lp| (0..lp.len()).map(move |k| (lp[k], lp[(k + 1) % lp.len()])))
+            .collect();
+        let orient = |a: [f64; 2], b: [f64; 2], c: [f64; 2]| {
+            let o = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+            let scale = (b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2);
+            if o.abs() <= 1e-12 * scale {
+                0.0
+            } else {
+                o.signum()
+            }
+        };
+        // c on segment ab, given collinear
+        let on = |a: [f64; 2], b: [f64; 2], c: [f64; 2]| {
+            (c[0] - a[0]) * (c[0] - b[0]) + (c[1] - a[1]) * (c[1] - b[1]) <= 0.0
+        };
+        let mut n = 0;
+        for i in 0..segs.len() {
+            for j in i + 1..segs.len() {
+                let (s, t) = (segs[i], segs[j]);
+                if s.0 == t.0 || s.0 == t.1 || s.1 == t.0 || s.1 == t.1 {
+                    continue;
+                }
+                let [a, b, c, d] = [s.0, s.1, t.0, t.1].map(|v| p.uv[v as usize]);
+                let (o1, o2) = (orient(a, b, c), orient(a, b, d));
+                let (o3, o4) = (orient(c, d, a), orient(c, d, b));
+                let hit = (o1 * o2 < 0.0 && o3 * o4 < 0.0)
+                    || (o1 == 0.0 && on(a, b, c))
+                    || (o2 == 0.0 && on(a, b, d))
+                    || (o3 == 0.0 && on(c, d, a))
+                    || (o4 == 0.0 && on(c, d, b));
+                n += hit as usize;
+            }
+        }
+        n
+    }
+
+    /// Area-weighted mean |ln(A2D/A3D)| over the triangles of `pieces`, and the range of
+    /// A2D/A3D.
+    pub fn area_distortion(mesh: &Mesh, pieces: &[Piece]) -> (f64, f64, f64) {
+        let (mut sum, mut wsum, mut lo, mut hi) = (0.0, 0.0, f64::MAX, f64::MIN);
+        for p in pieces {
+            for &t in &p.triangles {
+                let a3 = area_3d(mesh, p, t);
+                if a3 <= 0.0 {
+                    continue;
+                }
+                let r = signed_area(p, t) / a3;
+                sum += a3 * r.abs().ln().abs();
+                wsum += a3;
+                lo = lo.min(r);
+                hi = hi.max(r);
+            }
+        }
+        (sum / wsum.max(f64::MIN_POSITIVE), lo, hi)
+    }
+}

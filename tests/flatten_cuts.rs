@@ -1,13 +1,16 @@
 //! Pieces that are not disks: tubes, cone frustums, tubes with holes, closed boxes. Each shape
 //! is exactly developable away from where it must be cut, so its pattern must be an isometry:
-//! checked here triangle by triangle (2D against 3D edge lengths), with orientation from signed
-//! areas and overlap from a brute-force test of every pair of boundary segments, none of which
-//! uses the flatten module's own measures.
+//! checked triangle by triangle (2D against 3D edge lengths), with orientation from signed
+//! areas and overlap from a brute-force test of every pair of boundary segments
+//! (flatmesh::corpus::pattern_checks), none of which uses the flatten module's own measures.
 
 use flatmesh::algorithms::flatten::{self, cut::Cuts, InputUnit, Params, Unit};
 use flatmesh::algorithms::{AlgoError, Silent};
+use flatmesh::corpus::pattern_checks::{
+    area_distortion, boundary_crossings, boundary_length_error, edge_length_error, signed_area,
+};
 use flatmesh::mesh::{Mesh, RawMesh};
-use flatmesh::pattern::{Patterns, Piece};
+use flatmesh::pattern::Patterns;
 use std::collections::HashMap;
 use std::f64::consts::{PI, TAU};
 
@@ -170,91 +173,8 @@ fn run(mesh: &Mesh, params: &Params) -> (Patterns, serde_json::Map<String, serde
     (out.patterns.expect("patterns"), out.summary)
 }
 
-fn d3(a: [f64; 3], b: [f64; 3]) -> f64 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
-}
 fn d2(a: [f64; 2], b: [f64; 2]) -> f64 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt()
-}
-
-/// Largest relative difference between a triangle edge in 2D and in 3D: 0 for an isometry.
-fn isometry_error(mesh: &Mesh, p: &Piece) -> f64 {
-    let mut worst: f64 = 0.0;
-    for t in &p.triangles {
-        for i in 0..3 {
-            let (a, b) = (t[i] as usize, t[(i + 1) % 3] as usize);
-            let l3 = d3(
-                mesh.position(p.vertex_ids[a]),
-                mesh.position(p.vertex_ids[b]),
-            );
-            worst = worst.max((d2(p.uv[a], p.uv[b]) - l3).abs() / l3);
-        }
-    }
-    worst
-}
-
-/// Largest relative difference of a boundary edge, 2D against 3D.
-fn boundary_error(mesh: &Mesh, p: &Piece) -> f64 {
-    let mut worst: f64 = 0.0;
-    for lp in &p.boundary_loops {
-        for k in 0..lp.len() {
-            let (a, b) = (lp[k] as usize, lp[(k + 1) % lp.len()] as usize);
-            let l3 = d3(
-                mesh.position(p.vertex_ids[a]),
-                mesh.position(p.vertex_ids[b]),
-            );
-            worst = worst.max((d2(p.uv[a], p.uv[b]) - l3).abs() / l3);
-        }
-    }
-    worst
-}
-
-fn signed_area(p: &Piece, t: [u32; 3]) -> f64 {
-    let [a, b, c] = t.map(|v| p.uv[v as usize]);
-    0.5 * ((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
-}
-
-/// Pairs of boundary segments sharing no vertex that cross or touch. Orientations within
-/// 1e-12 of the squared segment length count as collinear (the shapes here keep their
-/// boundaries far apart, or lay them along one straight line, as a rectangle's side).
-fn boundary_crossings(p: &Piece) -> usize {
-    let segs: Vec<(u32, u32)> = p
-        .boundary_loops
-        .iter()
-        .flat_map(|lp| (0..lp.len()).map(move |k| (lp[k], lp[(k + 1) % lp.len()])))
-        .collect();
-    let orient = |a: [f64; 2], b: [f64; 2], c: [f64; 2]| {
-        let o = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
-        let scale = (b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2);
-        if o.abs() <= 1e-12 * scale {
-            0.0
-        } else {
-            o.signum()
-        }
-    };
-    // c on segment ab, given collinear
-    let on = |a: [f64; 2], b: [f64; 2], c: [f64; 2]| {
-        (c[0] - a[0]) * (c[0] - b[0]) + (c[1] - a[1]) * (c[1] - b[1]) <= 0.0
-    };
-    let mut n = 0;
-    for i in 0..segs.len() {
-        for j in i + 1..segs.len() {
-            let (s, t) = (segs[i], segs[j]);
-            if s.0 == t.0 || s.0 == t.1 || s.1 == t.0 || s.1 == t.1 {
-                continue;
-            }
-            let [a, b, c, d] = [s.0, s.1, t.0, t.1].map(|v| p.uv[v as usize]);
-            let (o1, o2) = (orient(a, b, c), orient(a, b, d));
-            let (o3, o4) = (orient(c, d, a), orient(c, d, b));
-            let hit = (o1 * o2 < 0.0 && o3 * o4 < 0.0)
-                || (o1 == 0.0 && on(a, b, c))
-                || (o2 == 0.0 && on(a, b, d))
-                || (o3 == 0.0 && on(c, d, a))
-                || (o4 == 0.0 && on(c, d, b));
-            n += hit as usize;
-        }
-    }
-    n
 }
 
 /// Everything the issue asks of an exactly developable shape: isometric (so stretch ≤ 1e-6 %),
@@ -267,8 +187,8 @@ fn check_exact(label: &str, mesh: &Mesh, pat: &Patterns) {
 /// encloses no curvature is a slit whose two sides lie on each other).
 fn check_isometric(label: &str, mesh: &Mesh, pat: &Patterns, apart: bool) {
     for p in &pat.pieces {
-        let iso = isometry_error(mesh, p);
-        let bnd = boundary_error(mesh, p);
+        let iso = edge_length_error(mesh, p);
+        let bnd = boundary_length_error(mesh, p);
         let flips = p
             .triangles
             .iter()
@@ -571,29 +491,6 @@ fn a_torus_is_refused_by_name() {
     );
 }
 
-/// Area-weighted mean |ln(A2D/A3D)| of a pattern.
-fn mean_log_area(mesh: &Mesh, pat: &Patterns) -> f64 {
-    let (mut sum, mut wsum) = (0.0, 0.0);
-    for p in &pat.pieces {
-        for &t in &p.triangles {
-            let [a, b, c] = t.map(|v| mesh.position(p.vertex_ids[v as usize]));
-            let (u, v) = (
-                [b[0] - a[0], b[1] - a[1], b[2] - a[2]],
-                [c[0] - a[0], c[1] - a[1], c[2] - a[2]],
-            );
-            let n = [
-                u[1] * v[2] - u[2] * v[1],
-                u[2] * v[0] - u[0] * v[2],
-                u[0] * v[1] - u[1] * v[0],
-            ];
-            let a3 = 0.5 * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-            sum += a3 * (signed_area(p, t) / a3).abs().ln().abs();
-            wsum += a3;
-        }
-    }
-    sum / wsum
-}
-
 /// The ARAP interior keeps an isometry isometric, keeps the boundary exact, and on a noisy
 /// half-cylinder (radial noise ±0.2 % of the radius, as benches/flatten.rs) spreads the area
 /// more evenly than the harmonic interior.
@@ -640,14 +537,14 @@ fn arap_interior_is_exact_when_it_can_be_and_lowers_area_distortion() {
     let (harmonic, _) = run(&mesh, &Params::default());
     let (rigid, _) = run(&mesh, &arap);
     let (h, r) = (
-        mean_log_area(&mesh, &harmonic),
-        mean_log_area(&mesh, &rigid),
+        area_distortion(&mesh, &harmonic.pieces).0,
+        area_distortion(&mesh, &rigid.pieces).0,
     );
     println!("noisy half-cylinder: mean |ln(A2D/A3D)| harmonic {h:.5}, arap {r:.5}");
     assert!(r < h);
     for pat in [&harmonic, &rigid] {
         let p = &pat.pieces[0];
-        assert!(boundary_error(&mesh, p) <= 1e-9);
+        assert!(boundary_length_error(&mesh, p) <= 1e-9);
         assert_eq!(
             p.triangles
                 .iter()
