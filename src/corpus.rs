@@ -155,6 +155,26 @@ pub fn with_normal_noise(mesh: &Mesh, sigma: f64, seed: u64) -> Mesh {
 /// Where the shared meshes live, relative to the crate root.
 pub const SHARED_MESHES: &str = "../shared/meshes";
 
+/// `../shared/meshes` beside the crate, for tests: None, with a visible SKIPPED line on
+/// stderr, when it is absent (a user's fresh clone); a panic when it is absent although
+/// `CI=true`, since CI always has it.
+pub fn shared_root_for_tests() -> Option<PathBuf> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join(SHARED_MESHES);
+    if dir.is_dir() {
+        return Some(dir);
+    }
+    assert!(
+        std::env::var("CI").as_deref() != Ok("true"),
+        "{} is missing although CI=true: CI always has it",
+        dir.display()
+    );
+    eprintln!(
+        "SKIPPED: {} is absent; the real-mesh checks did not run",
+        dir.display()
+    );
+    None
+}
+
 /// The open-surface meshes listed in `root/MANIFEST.tsv` (column `surface` starting with
 /// "open"), as paths; `None` when the manifest is missing.
 pub fn shared_open_meshes(root: &Path) -> Option<Vec<PathBuf>> {

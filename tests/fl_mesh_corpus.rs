@@ -8,24 +8,11 @@ use flatmesh::algorithms::Silent;
 use flatmesh::corpus::{self, Family, Procedural};
 use flatmesh::mesh::{Mesh, VertexKind};
 use proptest::prelude::*;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// ../shared/meshes, or None with a visible notice; under CI=true its absence is a failure.
 fn shared_root() -> Option<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join(corpus::SHARED_MESHES);
-    if dir.is_dir() {
-        return Some(dir);
-    }
-    assert!(
-        std::env::var("CI").as_deref() != Ok("true"),
-        "{} is missing although CI=true: CI always has it",
-        dir.display()
-    );
-    eprintln!(
-        "SKIPPED: {} is absent; the real-mesh checks did not run",
-        dir.display()
-    );
-    None
+    corpus::shared_root_for_tests()
 }
 
 /// Run and check what must hold for every input; returns (ϖ in, ϖ out, converged).

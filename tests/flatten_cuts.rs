@@ -7,7 +7,8 @@
 use flatmesh::algorithms::flatten::{self, cut::Cuts, InputUnit, Params, Unit};
 use flatmesh::algorithms::{AlgoError, Silent};
 use flatmesh::corpus::pattern_checks::{
-    area_distortion, boundary_crossings, boundary_length_error, edge_length_error, signed_area,
+    area_distortion, boundary_crossings, boundary_length_error, edge_length_error, flipped,
+    signed_area,
 };
 use flatmesh::mesh::{Mesh, RawMesh};
 use flatmesh::pattern::Patterns;
@@ -551,6 +552,42 @@ fn arap_interior_is_exact_when_it_can_be_and_lowers_area_distortion() {
                 .filter(|&&t| signed_area(p, t) <= 0.0)
                 .count(),
             0
+        );
+    }
+}
+
+/// Whole garments (one patch each, hem plus neck and two sleeves or straps) made flattenable by
+/// fl-mesh flatten into one piece each, cut open along three seams, with no flipped triangle,
+/// no overlap and every triangle edge within 0.01 % of its 3D length.
+#[test]
+fn garments_made_flattenable_flatten_without_overlap() {
+    let Some(root) = flatmesh::corpus::shared_root_for_tests() else {
+        return;
+    };
+    for rel in [
+        "garment/diffavatar_tshirt.obj",
+        "garment/gc_tee_sim.obj",
+        "garment/gf_dress.obj",
+    ] {
+        let (mesh, _) = flatmesh::io::load_path(&root.join(rel)).expect("loads");
+        let (flat, _) =
+            flatmesh::algorithms::fl_mesh::solve(&mesh, &Default::default(), &Silent::default())
+                .expect("fl-mesh runs");
+        assert!(flatmesh::corpus::max_flattenability(&flat) <= 1e-6, "{rel}");
+        let (pat, summary) = run(&flat, &Params::default());
+        assert_eq!(pat.pieces.len(), 1, "{rel}");
+        let p = &pat.pieces[0];
+        let (edge, bnd) = (edge_length_error(&flat, p), boundary_length_error(&flat, p));
+        let (flips, cross) = (flipped(p), boundary_crossings(p));
+        println!(
+            "{rel}: edge error {edge:.2e}, boundary {bnd:.2e}, flips {flips}, crossings {cross}"
+        );
+        assert_eq!(solver(&summary, 0)["real_cuts"], 3, "{rel}");
+        assert_eq!((flips, cross), (0, 0), "{rel}");
+        assert!(edge <= 1e-4 && bnd <= 1e-9, "{rel}: {edge} {bnd}");
+        assert!(
+            summary["job_warnings"].as_array().unwrap().is_empty(),
+            "{rel}"
         );
     }
 }
