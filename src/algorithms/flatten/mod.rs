@@ -746,7 +746,11 @@ pub fn run(mesh: &Mesh, params: &Params, control: &dyn Control) -> Result<Outcom
                 infos.push(i);
             }
             Err(AlgoError::Cancelled) => return Err(AlgoError::Cancelled),
-            Err(e) => job_warnings.push(format!("{} skipped: {e}", describe(name, faces))),
+            Err(e) => {
+                let e = e.to_string();
+                let why = e.strip_prefix(&format!("piece `{name}`: ")).unwrap_or(&e);
+                job_warnings.push(format!("{} skipped: {why}", describe(name, faces)));
+            }
         }
     }
     if pieces.is_empty() {
