@@ -484,16 +484,7 @@ pub mod pattern_checks {
     /// 3D area of triangle `t` of a piece.
     pub fn area_3d(mesh: &Mesh, p: &Piece, t: [u32; 3]) -> f64 {
         let [a, b, c] = t.map(|v| mesh.position(p.vertex_ids[v as usize]));
-        let (u, v) = (
-            [b[0] - a[0], b[1] - a[1], b[2] - a[2]],
-            [c[0] - a[0], c[1] - a[1], c[2] - a[2]],
-        );
-        let n = [
-            u[1] * v[2] - u[2] * v[1],
-            u[2] * v[0] - u[0] * v[2],
-            u[0] * v[1] - u[1] * v[0],
-        ];
-        0.5 * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt()
+        crate::geometry::triangle_area(a, b, c)
     }
 
     /// Triangles with signed 2D area ≤ 0.

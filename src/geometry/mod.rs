@@ -82,13 +82,18 @@ pub fn flattenability(mesh: &Mesh, theta: &[f64]) -> Vec<f64> {
         .collect()
 }
 
+/// Area of the triangle a, b, c.
+pub fn triangle_area(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> f64 {
+    let n = cross(sub(b, a), sub(c, a));
+    0.5 * dot(n, n).sqrt()
+}
+
 /// Area of every face.
 pub fn face_areas(mesh: &Mesh) -> Vec<f64> {
     (0..mesh.num_faces())
         .map(|f| {
             let [a, b, c] = mesh.face_positions(f);
-            let n = cross(sub(b, a), sub(c, a));
-            0.5 * dot(n, n).sqrt()
+            triangle_area(a, b, c)
         })
         .collect()
 }

@@ -288,19 +288,8 @@ impl Piece3 {
         self.tris
             .iter()
             .map(|t| {
-                let q = t.map(|w| self.pos[w as usize]);
-                let (u, v) = (
-                    [q[1][0] - q[0][0], q[1][1] - q[0][1], q[1][2] - q[0][2]],
-                    [q[2][0] - q[0][0], q[2][1] - q[0][1], q[2][2] - q[0][2]],
-                );
-                0.5 * dist(
-                    [
-                        u[1] * v[2] - u[2] * v[1],
-                        u[2] * v[0] - u[0] * v[2],
-                        u[0] * v[1] - u[1] * v[0],
-                    ],
-                    [0.0; 3],
-                )
+                let [a, b, c] = t.map(|w| self.pos[w as usize]);
+                crate::geometry::triangle_area(a, b, c)
             })
             .sum()
     }

@@ -719,10 +719,11 @@ pub fn run(mesh: &Mesh, params: &Params, control: &dyn Control) -> Result<Outcom
     params.check()?;
     let t0 = Instant::now();
     let mut job_warnings = Vec::new();
+    let diagonal = diameter(mesh.positions());
     let input_unit = params
         .input_unit
         .fixed()
-        .unwrap_or_else(|| Unit::guess(diameter(mesh.positions())));
+        .unwrap_or_else(|| Unit::guess(diagonal));
     let comps = components(mesh);
     let t_topo = t0.elapsed().as_secs_f64();
     let results: Vec<Result<(Piece, PieceInfo), AlgoError>> = comps
@@ -773,7 +774,7 @@ pub fn run(mesh: &Mesh, params: &Params, control: &dyn Control) -> Result<Outcom
                 "input_unit not given: `{}` assumed from the bounding-box diagonal {:.4} (the unit \
                  that puts it in [0.3, 3) m); pass input_unit to override",
                 input_unit.name(),
-                diameter(mesh.positions())
+                diagonal
             )),
         );
     }
