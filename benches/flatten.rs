@@ -1,14 +1,20 @@
 //! `flatten` end to end (pieces, real cuts, LPFB, interior Cholesky, measures, seams) on noisy
 //! half-cylinder patches of 50k and 200k faces, a noisy 50k-face tube (cut open, issue 13) and
-//! ../shared/meshes/classic/bff_face.obj, with the harmonic interior (the paper), the ARAP
-//! interior and LSCM. Before timing, each prints its area distortion measured here from the
-//! pattern: area-weighted mean |ln(A2D/A3D)| and the range of A2D/A3D over triangles.
+//! ../shared/meshes/classic/bff_face.obj, in four settings: `lpfb` (the default: conformal
+//! boundary angles, ARAP interior), `lpfb_harmonic` (conformal angles, harmonic interior),
+//! `lpfb_paper` (the paper as written: surface angles, harmonic interior) and `lscm`. Before
+//! timing, each prints its area distortion measured here from the pattern: area-weighted mean
+//! |ln(A2D/A3D)| and the range of A2D/A3D over triangles.
 //! Peers on this kind of machine (issues 4, 13): Boundary First Flattening 0.27 s at 50k faces
 //! and 2.1 s at 200k, mean |ln(A2D/A3D)| 0.0053 at 50k, A2D/A3D in 0.85–1.09 at 200k; libigl
 //! LSCM ≈ 1.0 s and CGAL LSCM ≈ 0.5 s at 50k.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use flatmesh::algorithms::flatten::{self, param::Interior, Method, Params};
+use flatmesh::algorithms::flatten::{
+    self,
+    param::{BoundaryAngles, Interior},
+    Method, Params,
+};
 use flatmesh::algorithms::Silent;
 use flatmesh::corpus::pattern_checks::area_distortion;
 use flatmesh::mesh::{Mesh, RawMesh};
@@ -77,17 +83,30 @@ fn bench(c: &mut Criterion) {
         Ok((m, _)) => cases.push(("bff_face_34144".into(), m)),
         Err(_) => println!("skipping bff_face: ../shared not present"),
     }
+    // the default (conformal boundary angles, ARAP interior), its harmonic interior, the
+    // paper as written (surface angles, harmonic interior), and LSCM
     let configs = [
-        ("lpfb", Method::Lpfb, Interior::Harmonic),
-        ("lpfb_arap", Method::Lpfb, Interior::Arap),
-        ("lscm", Method::Lscm, Interior::Harmonic),
+        ("lpfb", Interior::Arap, BoundaryAngles::Conformal),
+        (
+            "lpfb_harmonic",
+            Interior::Harmonic,
+            BoundaryAngles::Conformal,
+        ),
+        ("lpfb_paper", Interior::Harmonic, BoundaryAngles::Surface),
+        ("lscm", Interior::Harmonic, BoundaryAngles::Conformal),
     ];
     for (name, mesh) in &cases {
         g.throughput(Throughput::Elements(mesh.num_faces() as u64));
-        for (label, method, interior) in configs {
+        for (label, interior, boundary_angles) in configs {
+            let method = if label == "lscm" {
+                Method::Lscm
+            } else {
+                Method::Lpfb
+            };
             let params = Params {
                 method,
                 interior,
+                boundary_angles,
                 ..Params::default()
             };
             let o = flatten::run(mesh, &params, &Silent::default()).unwrap();

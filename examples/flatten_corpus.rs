@@ -13,12 +13,13 @@
 //! Columns: faces, boundary loops as given, real cuts, holes kept, flipped triangles (signed
 //! area ≤ 0), boundary crossings and touchings (every pair of boundary segments), S(Ω), largest relative
 //! edge-length error over all triangle edges (2D against 3D: the stretch an isometry would
-//! not have), largest relative boundary-edge error, ϖ_max of the piece's interior.
+//! not have), largest relative boundary-edge error, area-weighted mean |ln(A2D/A3D)|, ϖ_max
+//! of the piece's interior.
 
 use flatmesh::algorithms::{fl_mesh, flatten, parse_params, Silent};
 use flatmesh::corpus;
 use flatmesh::corpus::pattern_checks::{
-    boundary_crossings, boundary_length_error, edge_length_error, flipped,
+    area_distortion, boundary_crossings, boundary_length_error, edge_length_error, flipped,
 };
 use flatmesh::mesh::Mesh;
 use std::path::{Path, PathBuf};
@@ -71,7 +72,7 @@ fn main() {
     let params: flatten::Params = parse_params(&params).expect("parameters");
     std::fs::create_dir_all(&out).expect("output directory");
     println!(
-        "{:<28} {:<22} {:>6} {:>3} {:>3} {:>3} {:>5} {:>5} {:>2} {:>9} {:>9} {:>9} {:>6}",
+        "{:<28} {:<22} {:>6} {:>3} {:>3} {:>3} {:>5} {:>5} {:>2} {:>9} {:>9} {:>8} {:>9} {:>6}",
         "mesh",
         "piece",
         "faces",
@@ -83,6 +84,7 @@ fn main() {
         "S",
         "edge err",
         "bnd err",
+        "area",
         "ϖ_max",
         "s"
     );
@@ -121,7 +123,7 @@ fn main() {
         for (k, p) in pat.pieces.iter().enumerate() {
             let s = &res.summary["pieces"][k]["solver"];
             println!(
-                "{:<28} {:<22} {:>6} {:>3} {:>3} {:>3} {:>5} {:>5} {:>2} {:>9.2e} {:>9.2e} {:>9.2e} {:>6.2}{tag}",
+                "{:<28} {:<22} {:>6} {:>3} {:>3} {:>3} {:>5} {:>5} {:>2} {:>9.2e} {:>9.2e} {:>8.4} {:>9.2e} {:>6.2}{tag}",
                 case.name,
                 p.patch.chars().take(22).collect::<String>(),
                 p.triangles.len(),
@@ -133,6 +135,7 @@ fn main() {
                 p.measures["overlap"],
                 edge_length_error(&mesh, p),
                 boundary_length_error(&mesh, p),
+                area_distortion(&mesh, std::slice::from_ref(p)).0,
                 p.measures["varpi_max"].as_f64().unwrap_or(f64::NAN),
                 secs
             );

@@ -44,8 +44,9 @@ enum Command {
     /// flatten parameters: method=lpfb|lscm (lpfb), unit=mm|cm|dm|m|in (drawing unit, mm),
     /// input_unit=auto|mm|cm|dm|m|in (the mesh's unit; auto guesses it from the size),
     /// cuts=auto|virtual|real (auto: loops that enclose curvature are cut open, the others
-    /// stay holes), curvature_tolerance (1e-3 rad), interior=harmonic|arap (harmonic),
-    /// max_iterations (200), tolerance (1e-5), svg_triangles=true|false (false).
+    /// stay holes), curvature_tolerance (1e-3 rad), interior=arap|harmonic (arap),
+    /// boundary_angles=conformal|surface (conformal), max_iterations (200), tolerance (1e-5),
+    /// svg_triangles=true|false (false).
     ///
     /// fl-mesh parameters: w1 (1), w2 (0.1), tau (0.25), step_rule=merit|fixed|lm (merit),
     /// anchor=input|closest (input), until=flattenable|stationary (flattenable), tolerance

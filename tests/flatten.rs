@@ -2,7 +2,7 @@
 //! strips, whose unrolling is computed here in closed form, and the ipc dress panels whose
 //! `vt` is their own pattern), boundary lengths, virtual cutting, measures, LSCM, export.
 
-use flatmesh::algorithms::flatten::{self, Method, Params};
+use flatmesh::algorithms::flatten::{self, param::BoundaryAngles, Method, Params};
 use flatmesh::algorithms::{self, Silent};
 use flatmesh::mesh::{Mesh, RawMesh};
 use flatmesh::pattern::{Patterns, Piece};
@@ -601,6 +601,8 @@ fn sphere_cap(deg: f64) -> Mesh {
 
 /// A piece that cannot lie flat (a whole T-shirt body as one patch, χ = −2) is still
 /// flattened, but the job says so in words; a piece that can lie flat gets no such warning.
+/// With the defaults the T-shirt lies without a flip (the paper as written, surface angles
+/// and harmonic interior, gives 5), so the warning is about its distortion.
 #[test]
 fn unflattenable_piece_is_named_in_a_warning() {
     let ok = flatten::run(&sphere_cap(60.0), &Params::default(), &Silent::default()).unwrap();
@@ -617,9 +619,20 @@ fn unflattenable_piece_is_named_in_a_warning() {
     let flips = piece.measures["flipped_triangles"].as_u64().unwrap();
     let ws = out.summary["job_warnings"].as_array().unwrap();
     println!("t-shirt: {flips} flips, warnings {ws:?}");
-    assert!(flips > 0);
+    assert_eq!(flips, 0);
     assert_eq!(ws.len(), 1);
     let w = ws[0].as_str().unwrap();
+    assert!(w.contains(&format!("piece `{}`", piece.patch)) && w.contains("not developable"));
+    assert!(w.contains("area distortion") && w.contains("ϖ_max"));
+    let paper = Params {
+        boundary_angles: BoundaryAngles::Surface,
+        interior: flatten::param::Interior::Harmonic,
+        ..Params::default()
+    };
+    let out = flatten::run(&shirt, &paper, &Silent::default()).unwrap();
+    let piece = &out.patterns.as_ref().unwrap().pieces[0];
+    assert!(piece.measures["flipped_triangles"].as_u64().unwrap() > 0);
+    let w = out.summary["job_warnings"][0].as_str().unwrap();
     assert!(w.contains(&format!("piece `{}`", piece.patch)) && w.contains("flipped"));
 }
 
@@ -1325,5 +1338,100 @@ fn smallest_pieces() {
             let err = rigid_fit_max_error(&piece.uv, &un) / diameter2(&un);
             assert!(err < 1e-12, "{method:?}: {err}");
         }
+    }
+}
+
+/// The conformal boundary angles (the Yamabe step of Boundary First Flattening with u = 0 on
+/// the boundary) against truths computed here: their shifts add up to the interior's angle
+/// defects recounted from the corner angles (discrete Gauss–Bonnet), vanish on a developable
+/// piece, and on noisy near-developable pieces the pattern's area distortion, recomputed from
+/// the pattern, falls well below that of the paper's surface angles while every boundary
+/// edge keeps its 3D length and no triangle flips.
+#[test]
+fn conformal_boundary_angles() {
+    use flatmesh::algorithms::flatten::param::CotanSystem;
+    use flatmesh::corpus::pattern_checks::{area_distortion, boundary_length_error, flipped};
+    use flatmesh::corpus::{Family, Procedural};
+    let noisy = |family, noise| {
+        Procedural {
+            family,
+            faces: 2000,
+            noise,
+        }
+        .mesh()
+    };
+    for (name, mesh) in [
+        ("dome", noisy(Family::Dome, 0.01)),
+        ("saddle", noisy(Family::Saddle, 0.1)),
+        ("cone", noisy(Family::Cone, 0.0)),
+    ] {
+        let (pos, tris) = (mesh.positions(), mesh.triangles());
+        let mut sums = vec![0.0; pos.len()];
+        for t in tris {
+            let q = t.map(|v| pos[v as usize]);
+            for i in 0..3 {
+                sums[t[i] as usize] +=
+                    flatmesh::geometry::corner_angle(q[i], q[(i + 1) % 3], q[(i + 2) % 3]);
+            }
+        }
+        let interior: Vec<bool> = (0..pos.len() as u32)
+            .map(|v| mesh.conn().is_interior(v))
+            .collect();
+        let boundary: Vec<bool> = interior.iter().map(|i| !i).collect();
+        let shift = CotanSystem::new(pos, tris, &boundary)
+            .unwrap()
+            .angle_shift(tris, &sums)
+            .unwrap();
+        let defects: f64 = (0..pos.len())
+            .filter(|&v| interior[v])
+            .map(|v| 2.0 * PI - sums[v])
+            .sum();
+        let total: f64 = shift.iter().sum();
+        let largest = shift.iter().fold(0.0f64, |m, s| m.max(s.abs()));
+        println!("{name}: Σ shift {total:.6e}, Σ Ω {defects:.6e}, largest {largest:.3e}");
+        assert!((total - defects).abs() <= 1e-9 * (1.0 + defects.abs()));
+        assert!(shift.iter().zip(&interior).all(|(s, &i)| !i || *s == 0.0));
+        if name == "cone" {
+            assert!(largest < 1e-10, "a developable piece needs no shift");
+        }
+    }
+    let fixture = |n: &str| {
+        Mesh::new(flatmesh::fixtures::by_name(n).unwrap().mesh)
+            .unwrap()
+            .0
+    };
+    for (name, mesh) in [
+        ("cone-2000-0.1", noisy(Family::Cone, 0.1)),
+        ("pleats-2000-0.1", noisy(Family::Pleats, 0.1)),
+        ("tube-2000-0.01", noisy(Family::Tube, 0.01)),
+        ("fixture cylinder_noisy", fixture("cylinder_noisy")),
+    ] {
+        let mut distortion = [0.0; 2];
+        for (k, boundary_angles) in [BoundaryAngles::Conformal, BoundaryAngles::Surface]
+            .into_iter()
+            .enumerate()
+        {
+            let params = Params {
+                boundary_angles,
+                ..Params::default()
+            };
+            let out = flatten::run(&mesh, &params, &Silent::default()).unwrap();
+            let pieces = &out.patterns.as_ref().unwrap().pieces;
+            distortion[k] = area_distortion(&mesh, pieces).0;
+            if k == 0 {
+                for p in pieces {
+                    assert_eq!(flipped(p), 0, "{name}");
+                    assert!(boundary_length_error(&mesh, p) <= 1e-9, "{name}");
+                }
+            }
+        }
+        println!(
+            "{name}: mean |ln(A2D/A3D)| conformal {:.5}, surface {:.5}",
+            distortion[0], distortion[1]
+        );
+        assert!(
+            distortion[0] < 0.8 * distortion[1],
+            "{name}: {distortion:?}"
+        );
     }
 }

@@ -163,9 +163,13 @@ pub struct Params {
     /// How inner boundary loops are treated: `auto` (default), `virtual`, `real`.
     #[serde(default)]
     pub cuts: cut::Cuts,
-    /// Interior solve after LPFB: `harmonic` (default, the paper's Eq. 15–18) or `arap`.
+    /// Interior solve after LPFB: `arap` (default) or `harmonic` (the paper's Eq. 15–18).
     #[serde(default)]
     pub interior: param::Interior,
+    /// LPFB's boundary angle targets: `conformal` (default: surface angles corrected for the
+    /// interior curvature, as Boundary First Flattening) or `surface` (Eq. 8 as written).
+    #[serde(default)]
+    pub boundary_angles: param::BoundaryAngles,
     /// Curvature (radians) a hole may enclose and still stay closed in the plane, and above
     /// which a vertex of a closed piece counts as curved (1e-3).
     #[serde(default = "default_curvature_tolerance")]
@@ -188,7 +192,8 @@ impl Default for Params {
             unit: Unit::Mm,
             input_unit: InputUnit::Auto,
             cuts: cut::Cuts::Auto,
-            interior: param::Interior::Harmonic,
+            interior: param::Interior::Arap,
+            boundary_angles: param::BoundaryAngles::Conformal,
             curvature_tolerance: default_curvature_tolerance(),
             max_iterations: default_max_iterations(),
             tolerance: default_tolerance(),
@@ -333,10 +338,35 @@ fn diameter(pos: &[[f64; 3]]) -> f64 {
     cut::dist(lo, hi)
 }
 
+/// The loop's θ targets a_i − shift (see [`param::CotanSystem::angle_shift`]). A boundary
+/// vertex with several copies on the loop (the end of a virtual cut path) shares its shift
+/// among them in proportion to their angles; copies of interior vertices (cut path vertices)
+/// keep a_i.
+fn shifted_targets(cl: &cut::CutLoop, shift: &[f64]) -> Vec<f64> {
+    let mut total = vec![0.0; shift.len()];
+    for (&v, &a) in cl.vertex.iter().zip(&cl.angle) {
+        total[v as usize] += a;
+    }
+    cl.vertex
+        .iter()
+        .zip(&cl.angle)
+        .map(|(&v, &a)| {
+            let v = v as usize;
+            if total[v] > 0.0 {
+                a - shift[v] * a / total[v]
+            } else {
+                a
+            }
+        })
+        .collect()
+}
+
 /// LPFB of a piece (Sec. 3): planar positions of its boundary vertices, with solver figures.
+/// `shift` moves the θ targets off the surface angles (the conformal boundary angles).
 pub fn lpfb_boundary(
     p: &cut::Piece3,
     params: &Params,
+    shift: Option<&[f64]>,
     control: &dyn Control,
     info: &mut PieceInfo,
 ) -> Result<Vec<Option<[f64; 2]>>, AlgoError> {
@@ -368,9 +398,13 @@ pub fn lpfb_boundary(
             )
         })
         .collect();
+    let angles = match shift {
+        None => cl.angle.clone(),
+        Some(s) => shifted_targets(&cl, s),
+    };
     let problem = lpfb::Problem {
         lengths,
-        angles: cl.angle.clone(),
+        angles,
         pairs: cl.seeds.clone(),
         antiparallel: cl.cut_edges.clone(),
     };
@@ -451,14 +485,25 @@ pub fn flatten_piece(
     let t0 = Instant::now();
     let uv = match params.method {
         Method::Lpfb => {
-            let fixed = lpfb_boundary(p, params, control, &mut info)?;
+            let mut boundary = vec![false; p.pos.len()];
+            for &v in p.loops.iter().flatten() {
+                boundary[v as usize] = true;
+            }
+            let mut system = param::CotanSystem::new(&p.pos, &p.tris, &boundary).map_err(err)?;
+            let shift = match params.boundary_angles {
+                param::BoundaryAngles::Surface => None,
+                param::BoundaryAngles::Conformal => {
+                    Some(system.angle_shift(&p.tris, &p.angle_sums()).map_err(err)?)
+                }
+            };
+            let fixed = lpfb_boundary(p, params, shift.as_deref(), control, &mut info)?;
             info.seconds_lpfb = t0.elapsed().as_secs_f64();
             let t1 = Instant::now();
-            let uv = match params.interior {
-                param::Interior::Harmonic => param::harmonic_fill(&p.pos, &p.tris, &fixed),
-                param::Interior::Arap => param::arap_fill(&p.pos, &p.tris, &fixed),
-            }
-            .map_err(err)?;
+            let arap = match params.interior {
+                param::Interior::Harmonic => 0,
+                param::Interior::Arap => param::ARAP_ITERATIONS,
+            };
+            let uv = system.fill(&p.pos, &p.tris, &fixed, arap).map_err(err)?;
             info.seconds_param = t1.elapsed().as_secs_f64();
             uv
         }
@@ -706,6 +751,17 @@ fn piece_warning(p: &Piece, i: &PieceInfo, params: &Params) -> Option<String> {
             "the pattern overlaps itself".to_string()
         };
         what.push(format!("{overlap}; {why}"));
+    } else if num("varpi_max") > DEVELOPABLE_TOLERANCE
+        && num("area_distortion_pct") > DISTORTION_WARNING_PCT
+    {
+        what.push(format!(
+            "it is not developable (ϖ_max {:.3e} rad), so its pattern is distorted (area \
+             distortion {:.1} %, stretch up to {:.1} %): make it more developable (fl-mesh) or \
+             split it into patches",
+            num("varpi_max"),
+            num("area_distortion_pct"),
+            num("stretch_max_pct")
+        ));
     }
     (!what.is_empty()).then(|| format!("piece `{}`: {}", p.patch, what.join("; ")))
 }
@@ -713,6 +769,10 @@ fn piece_warning(p: &Piece, i: &PieceInfo, params: &Params) -> Option<String> {
 /// A boundary edge whose 2D length differs from 3D by more than this (relative) is named in a
 /// warning: LPFB lays the boundary out with the 3D lengths, so it reaches ~1e-14.
 pub const BOUNDARY_LENGTH_TOLERANCE: f64 = 1e-9;
+
+/// A(Ω) (Eq. 19, percent) above which a piece that is not developable is warned about even
+/// when it does not overlap: about what woven fabric gives without showing it.
+pub const DISTORTION_WARNING_PCT: f64 = 1.0;
 
 /// Run `flatten` on a mesh.
 pub fn run(mesh: &Mesh, params: &Params, control: &dyn Control) -> Result<Outcome, AlgoError> {

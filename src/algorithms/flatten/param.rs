@@ -106,38 +106,201 @@ fn spd_solve(
 #[serde(rename_all = "lowercase")]
 pub enum Interior {
     /// Cotangent-harmonic with the boundary fixed (Eq. 15–18, the paper).
-    #[default]
     Harmonic,
     /// That, then as-rigid-as-possible local/global steps with the boundary still fixed.
+    /// Default: it lowers the largest stretch of every piece measured and the area
+    /// distortion of near-developable ones (the figures in benches/flatten.rs) for 25–45 %
+    /// more time; on strongly curved pieces it trades a few percent of area for that.
+    #[default]
     Arap,
 }
 
-/// Eq. 15–18: planar positions of all vertices, the `fixed` ones kept where they are and the
-/// others the cotangent-harmonic interpolation (x and y with one Cholesky factor).
-pub fn harmonic_fill(
-    pos: &[[f64; 3]],
-    tris: &[[u32; 3]],
-    fixed: &[Option<[f64; 2]>],
-) -> Result<Vec<[f64; 2]>, String> {
-    fill(pos, tris, fixed, 0)
-}
-
-/// Most ARAP local/global iterations of [`arap_fill`].
+/// Most ARAP local/global iterations of [`CotanSystem::fill`].
 pub const ARAP_ITERATIONS: usize = 20;
 
-/// [`harmonic_fill`], then up to [`ARAP_ITERATIONS`] as-rigid-as-possible iterations (Liu et
-/// al. 2008, "A local/global approach to mesh parameterization") with the boundary still
-/// fixed: the local step fits to each triangle the rotation closest to its map, the global
-/// step solves the same cotangent system as Eq. 17 with the rotated 3D edges on the right, so
-/// the one factorisation serves every iteration. Stops when the ARAP energy falls by less
-/// than 1e-4 relative. The harmonic map is returned instead when ARAP would flip more
-/// triangles than it.
-pub fn arap_fill(
-    pos: &[[f64; 3]],
-    tris: &[[u32; 3]],
-    fixed: &[Option<[f64; 2]>],
-) -> Result<Vec<[f64; 2]>, String> {
-    fill(pos, tris, fixed, ARAP_ITERATIONS)
+/// Where LPFB's boundary angles aim (the θ targets of Eq. 8).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum BoundaryAngles {
+    /// The surface angles corrected by [`CotanSystem::angle_shift`]: the interior's curvature
+    /// is spread conformally instead of being left to the interior solve. Default: it lowers
+    /// the area distortion of non-developable pieces several-fold (benches/flatten.rs).
+    #[default]
+    Conformal,
+    /// The surface's inner angles a_i (Eq. 8 as written).
+    Surface,
+}
+
+/// The cotangent system of a piece with its boundary vertices eliminated (the matrix of
+/// Eq. 17 with the fixed rows of Eq. 18 removed, sign flipped): factored once and shared by
+/// the conformal boundary angles ([`CotanSystem::angle_shift`]) and the interior solves
+/// ([`CotanSystem::fill`]), since both eliminate the same vertices.
+pub struct CotanSystem {
+    w: Vec<[f64; 3]>,
+    free_id: Vec<usize>,
+    nf: usize,
+    factor: Option<SpdFactor>,
+}
+
+impl CotanSystem {
+    /// Assemble and factor; `boundary[v]` marks the vertices the solves will fix.
+    pub fn new(pos: &[[f64; 3]], tris: &[[u32; 3]], boundary: &[bool]) -> Result<Self, String> {
+        let mut free_id = vec![usize::MAX; pos.len()];
+        let mut nf = 0;
+        for (v, &b) in boundary.iter().enumerate() {
+            if !b {
+                free_id[v] = nf;
+                nf += 1;
+            }
+        }
+        let w = half_cots(pos, tris);
+        // lower triangle only (the factorisation reads Side::Lower); the diagonal is summed
+        // here so the triplet list holds about one entry per edge and face
+        let mut trip = Vec::with_capacity(tris.len() * 3 + nf);
+        let mut diag = vec![0.0; nf];
+        for (t, wt) in tris.iter().zip(&w) {
+            for i in 0..3 {
+                let (a, b) = (t[opposite(i).0] as usize, t[opposite(i).1] as usize);
+                let (fa, fb) = (free_id[a], free_id[b]);
+                for fp in [fa, fb] {
+                    if fp != usize::MAX {
+                        diag[fp] += wt[i];
+                    }
+                }
+                if fa != usize::MAX && fb != usize::MAX {
+                    trip.push(Triplet::new(fa.max(fb), fa.min(fb), -wt[i]));
+                }
+            }
+        }
+        trip.extend(diag.iter().enumerate().map(|(i, &d)| Triplet::new(i, i, d)));
+        let factor = if nf > 0 {
+            Some(SpdFactor::new(nf, &trip, 2)?)
+        } else {
+            None
+        };
+        Ok(CotanSystem {
+            w,
+            free_id,
+            nf,
+            factor,
+        })
+    }
+
+    /// Per vertex, how far the flat boundary angle should differ from the surface's inner
+    /// angle so that a map keeping the boundary lengths is conformal inside: the Yamabe step
+    /// of Boundary First Flattening (Sawhney & Crane 2017, Sec. 4) with boundary scale factor
+    /// u = 0. Solve L_II u_I = −Ω_I (Ω the angle defects 2π − θ), then the flat turning at a
+    /// boundary vertex is k̃_b = k_b + (L u)_b, so its inner angle target is a_b − (L u)_b;
+    /// the value returned is (L u)_b (0 at interior vertices). The shifts sum to Σ Ω_I, so
+    /// the targets satisfy the closed-path theorem exactly (discrete Gauss–Bonnet). LPFB
+    /// then keeps every boundary length exact and moves the angles as little as it must to
+    /// close the loop, where BFF would move the lengths.
+    pub fn angle_shift(
+        &mut self,
+        tris: &[[u32; 3]],
+        angle_sums: &[f64],
+    ) -> Result<Vec<f64>, String> {
+        let mut shift = vec![0.0; self.free_id.len()];
+        let Some(factor) = self.factor.as_mut() else {
+            return Ok(shift);
+        };
+        let mut u = Mat::<f64>::zeros(self.nf, 1);
+        for (v, &f) in self.free_id.iter().enumerate() {
+            if f != usize::MAX {
+                u[(f, 0)] = -(2.0 * std::f64::consts::PI - angle_sums[v]);
+            }
+        }
+        factor.solve(&mut u);
+        // (L u)_b = Σ_j w_bj (u_b − u_j) = −Σ_{j interior} w_bj u_j, as u_b = 0
+        for (t, wt) in tris.iter().zip(&self.w) {
+            for i in 0..3 {
+                let (a, b) = (t[opposite(i).0] as usize, t[opposite(i).1] as usize);
+                for (p, q) in [(a, b), (b, a)] {
+                    if self.free_id[p] == usize::MAX && self.free_id[q] != usize::MAX {
+                        shift[p] -= wt[i] * u[(self.free_id[q], 0)];
+                    }
+                }
+            }
+        }
+        match shift.iter().position(|s| !s.is_finite()) {
+            Some(v) => Err(format!(
+                "the conformal boundary angle at vertex {v} is not finite (degenerate triangles)"
+            )),
+            None => Ok(shift),
+        }
+    }
+
+    /// Eq. 15–18: planar positions of all vertices, the boundary ones taken from `fixed` and
+    /// the others the cotangent-harmonic interpolation (x and y with the one factor). With
+    /// `arap_iterations` > 0, at most that many as-rigid-as-possible iterations follow (Liu
+    /// et al. 2008, "A local/global approach to mesh parameterization") with the boundary
+    /// still fixed: the local step fits to each triangle the rotation closest to its map, the
+    /// global step solves the same system with the rotated 3D edges on the right. They stop
+    /// when the ARAP energy falls by less than 1e-4 relative, and the harmonic map is kept
+    /// instead when ARAP would flip more triangles than it.
+    pub fn fill(
+        &mut self,
+        pos: &[[f64; 3]],
+        tris: &[[u32; 3]],
+        fixed: &[Option<[f64; 2]>],
+        arap_iterations: usize,
+    ) -> Result<Vec<[f64; 2]>, String> {
+        let free_id = &self.free_id;
+        if let Some(v) =
+            (0..fixed.len()).find(|&v| fixed[v].is_some() != (free_id[v] == usize::MAX))
+        {
+            return Err(format!(
+                "vertex {v}: the interior solve fixes exactly the boundary vertices (internal error)"
+            ));
+        }
+        let mut uv: Vec<[f64; 2]> = fixed.iter().map(|f| f.unwrap_or([0.0, 0.0])).collect();
+        let Some(factor) = self.factor.as_mut() else {
+            return Ok(uv);
+        };
+        // the right-hand side from the fixed vertices, the same for every solve
+        let mut base = Mat::<f64>::zeros(self.nf, 2);
+        for (t, wt) in tris.iter().zip(&self.w) {
+            for i in 0..3 {
+                let (a, b) = (t[opposite(i).0] as usize, t[opposite(i).1] as usize);
+                for (p, q) in [(a, b), (b, a)] {
+                    if let (f, Some(x)) = (free_id[p], fixed[q]) {
+                        if f != usize::MAX {
+                            base[(f, 0)] += wt[i] * x[0];
+                            base[(f, 1)] += wt[i] * x[1];
+                        }
+                    }
+                }
+            }
+        }
+        let mut rhs = base.clone();
+        factor.solve(&mut rhs);
+        for (v, &f) in free_id.iter().enumerate() {
+            if f != usize::MAX {
+                uv[v] = [rhs[(f, 0)], rhs[(f, 1)]];
+            }
+        }
+        if arap_iterations > 0 {
+            let arap = arap_steps(
+                tris,
+                &self.w,
+                &local_frames(pos, tris),
+                free_id,
+                &base,
+                factor,
+                &uv,
+                arap_iterations,
+            );
+            if arap.iter().all(|p| p[0].is_finite() && p[1].is_finite())
+                && flipped(&arap, tris) <= flipped(&uv, tris)
+            {
+                uv = arap;
+            }
+        }
+        if uv.iter().any(|p| !p[0].is_finite() || !p[1].is_finite()) {
+            return Err("the interior solve produced a non-finite position".into());
+        }
+        Ok(uv)
+    }
 }
 
 /// Each triangle laid flat by its 3D edge lengths: corner 0 at the origin, corner 1 on +x.
@@ -177,89 +340,6 @@ fn flipped(uv: &[[f64; 2]], tris: &[[u32; 3]]) -> usize {
 #[inline]
 fn opposite(i: usize) -> (usize, usize) {
     ((i + 1) % 3, (i + 2) % 3)
-}
-
-fn fill(
-    pos: &[[f64; 3]],
-    tris: &[[u32; 3]],
-    fixed: &[Option<[f64; 2]>],
-    arap_iterations: usize,
-) -> Result<Vec<[f64; 2]>, String> {
-    let nv = pos.len();
-    let mut free_id = vec![usize::MAX; nv];
-    let mut nf = 0;
-    for v in 0..nv {
-        if fixed[v].is_none() {
-            free_id[v] = nf;
-            nf += 1;
-        }
-    }
-    let mut uv: Vec<[f64; 2]> = fixed.iter().map(|f| f.unwrap_or([0.0, 0.0])).collect();
-    if nf == 0 {
-        return Ok(uv);
-    }
-    let w = half_cots(pos, tris);
-    // lower triangle only (the factorisation reads Side::Lower); the diagonal is summed here
-    // so the triplet list holds about one entry per edge and face. `base` is the right-hand
-    // side from the fixed vertices, the same for every solve.
-    let mut trip = Vec::with_capacity(tris.len() * 3 + nf);
-    let mut diag = vec![0.0; nf];
-    let mut base = Mat::<f64>::zeros(nf, 2);
-    for (t, wt) in tris.iter().zip(&w) {
-        for i in 0..3 {
-            let (a, b) = (t[opposite(i).0] as usize, t[opposite(i).1] as usize);
-            let wij = wt[i];
-            let (fa, fb) = (free_id[a], free_id[b]);
-            for (fp, q) in [(fa, b), (fb, a)] {
-                if fp == usize::MAX {
-                    continue;
-                }
-                diag[fp] += wij;
-                if free_id[q] == usize::MAX {
-                    let u = fixed[q].unwrap_or([0.0, 0.0]);
-                    base[(fp, 0)] += wij * u[0];
-                    base[(fp, 1)] += wij * u[1];
-                }
-            }
-            if fa != usize::MAX && fb != usize::MAX {
-                trip.push(Triplet::new(fa.max(fb), fa.min(fb), -wij));
-            }
-        }
-    }
-    trip.extend(diag.iter().enumerate().map(|(i, &d)| Triplet::new(i, i, d)));
-    let mut factor = SpdFactor::new(nf, &trip, 2)?;
-    let mut rhs = base.clone();
-    factor.solve(&mut rhs);
-    let scatter = |rhs: &Mat<f64>, uv: &mut [[f64; 2]]| {
-        for v in 0..nv {
-            let f = free_id[v];
-            if f != usize::MAX {
-                uv[v] = [rhs[(f, 0)], rhs[(f, 1)]];
-            }
-        }
-    };
-    scatter(&rhs, &mut uv);
-    if arap_iterations > 0 {
-        let arap = arap_steps(
-            tris,
-            &w,
-            &local_frames(pos, tris),
-            &free_id,
-            &base,
-            &mut factor,
-            &uv,
-            arap_iterations,
-        );
-        if arap.iter().all(|p| p[0].is_finite() && p[1].is_finite())
-            && flipped(&arap, tris) <= flipped(&uv, tris)
-        {
-            uv = arap;
-        }
-    }
-    if uv.iter().any(|p| !p[0].is_finite() || !p[1].is_finite()) {
-        return Err("the interior solve produced a non-finite position".into());
-    }
-    Ok(uv)
 }
 
 /// ARAP local/global iterations from `start` (see [`arap_fill`]).
