@@ -12,8 +12,15 @@
 //!    boundary stretched 30-fold; `cuts = "virtual"` still does that;
 //! 3. the virtual cut of Sec. 3.2 for the holes that stay (Dijkstra paths inner → outer);
 //! 4. LPFB ([`lpfb`]): Eq. 9/10 solved by Eq. 11–14, boundary by Eq. 6–7, mapped back from the
-//!    cut loop to the loops of the piece (Sec. 3.2 step 6);
-//! 5. interior ([`param`]): intrinsic parameterization with the LPFB fixed, Eq. 15–18;
+//!    cut loop to the loops of the piece (Sec. 3.2 step 6). Beyond the paper, by default the
+//!    θ targets of Eq. 8 are not the surface angles a_i but a_i corrected for the curvature
+//!    inside the piece ([`param::CotanSystem::angle_shift`], Boundary First Flattening's
+//!    Yamabe step with boundary scale 0): with a_i, a non-developable piece's whole angle
+//!    defect is left to the interior solve, which on the noisy half-cylinders gave 3–9 times
+//!    the area distortion of BFF and on raw garments hundreds of flipped triangles; the
+//!    lengths stay exact either way. `boundary_angles = "surface"` is the paper;
+//! 5. interior ([`param`]): intrinsic parameterization with the LPFB fixed, Eq. 15–18, then by
+//!    default ARAP steps with the boundary still fixed (`interior = "harmonic"` is the paper);
 //! 6. measures ([`measures`]): A(Ω), L²/L∞ stretch, Π_L, Π_θ, flips, S(Ω), σ1/σ2 stretch, the
 //!    worst boundary edge against 3D, ϖ_max of the piece.
 //!
