@@ -101,8 +101,8 @@ fn bench(c: &mut Criterion) {
              may not touch), process peak RSS so far {}",
             mesh.num_faces(),
             mesh.num_vertices(),
-            out.summary["iterations"],
-            out.summary["converged"],
+            out.summary.report.iterations,
+            out.summary.report.converged,
             peak as f64 / 1e6,
             vm_hwm()
         );

@@ -121,15 +121,15 @@ fn main() {
             flatmesh::io::pattern::to_svg(&pat),
         );
         for (k, p) in pat.pieces.iter().enumerate() {
-            let s = &res.summary["pieces"][k]["solver"];
+            let s = &res.summary.pieces[k].solver;
             println!(
                 "{:<28} {:<22} {:>6} {:>3} {:>3} {:>3} {:>5} {:>5} {:>2} {:>9.2e} {:>9.2e} {:>8.4} {:>9.2e} {:>6.2}{tag}",
                 case.name,
                 p.patch.chars().take(22).collect::<String>(),
                 p.triangles.len(),
-                s["loops"],
-                s["real_cuts"],
-                s["holes"],
+                s.loops,
+                s.real_cuts,
+                s.holes,
                 flipped(p),
                 boundary_crossings(p),
                 p.measures["overlap"],
@@ -140,8 +140,8 @@ fn main() {
                 secs
             );
         }
-        for w in res.summary["job_warnings"].as_array().into_iter().flatten() {
-            println!("{:<28}   warning: {}", case.name, w.as_str().unwrap_or(""));
+        for w in &res.summary.job_warnings {
+            println!("{:<28}   warning: {w}", case.name);
         }
     }
 }

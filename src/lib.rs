@@ -2,7 +2,8 @@
 //!
 //! Layers (../shared/DESIGN.md): data flows one way, bytes → [`mesh`] → algorithms →
 //! outcome → bytes. [`geometry`] holds pure measures, [`report`] the plain report type,
-//! [`io`] the readers and writers, [`fixtures`] procedural meshes with known answers.
+//! [`io`] the readers and writers, [`jobs`] the job kinds and the files a job produces (used by
+//! the CLI and the [`service`] alike), [`fixtures`] procedural meshes with known answers.
 #![warn(missing_docs)]
 
 pub mod algorithms;
@@ -10,6 +11,7 @@ pub mod corpus;
 pub mod fixtures;
 pub mod geometry;
 pub mod io;
+pub mod jobs;
 pub mod linalg;
 pub mod mesh;
 pub mod pattern;

@@ -3,6 +3,7 @@
 use clap::{Parser, Subcommand};
 use flatmesh::algorithms::{self, Control, Progress};
 use flatmesh::io;
+use flatmesh::jobs::{artifacts, Input, JobSpec, Kind};
 use flatmesh::report::Report;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -34,9 +35,10 @@ enum Command {
     },
     /// Run a job locally, without a server, and write its results into DIR.
     ///
-    /// DIR receives report.json (the flattenability report of the output mesh plus the job's
-    /// own figures), mesh.glb and mesh.obj; `flatten` also writes patterns.json,
-    /// patterns.svg and patterns.dxf. Progress goes to stderr. Exit status: 0 on success, 2
+    /// DIR receives the files a service job stores: report.json (the flattenability report of
+    /// the output mesh, the job's own figures under "job"), mesh.glb, mesh.gltf and mesh.obj;
+    /// `flatten`, and the kinds that change the mesh (their output flattened with flatten's
+    /// defaults), also write patterns.json, patterns.svg and patterns.dxf. Progress goes to stderr. Exit status: 0 on success, 2
     /// for invalid input or parameters, 3 when an optimiser (fl-mesh, subdivide) ran and wrote
     /// its best result but did not converge (one line on stderr gives the ϖ_max reached, why it
     /// stopped and the stuck vertices), 1 on other failures.
@@ -57,13 +59,13 @@ enum Command {
     /// iterate is written (never worse than the input in ϖ_max); when it is not flattenable
     /// the exit status is 3.
     ///
-    /// subdivide (Sec. 3 of Wang's FL meshes) also writes level_<k>.glb and level_<k>.obj for
+    /// subdivide (Sec. 3 of Wang's FL meshes) also writes level_<k>.glb, .gltf and .obj for
     /// every level; parameters: levels (1; or --levels), curves (or --curves), split_ratio
     /// (0.5), first_order_runs (10), second_order_runs (100), flatten_levels=true|false
     /// (true), fl_mesh={...} (the fl-mesh parameters used on each level).
     Run {
         /// Job kind.
-        #[arg(value_parser = clap::builder::PossibleValuesParser::new(algorithms::KINDS))]
+        #[arg(value_parser = clap::builder::PossibleValuesParser::new(Kind::names()))]
         kind: String,
         /// The input mesh.
         mesh: PathBuf,
@@ -248,10 +250,15 @@ fn run(
             return ExitCode::from(2);
         }
     };
-    if let Err(e) = algorithms::validate(kind, &params) {
-        eprintln!("flatmesh: {e}");
-        return ExitCode::from(2);
-    }
+    let spec = match JobSpec::parse(kind, &params)
+        .and_then(|s| s.check_reference(reference.is_some()).map(|_| s))
+    {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("flatmesh: {e}");
+            return ExitCode::from(2);
+        }
+    };
     let (mesh, warnings) = match load(mesh) {
         Ok(m) => m,
         Err(code) => return code,
@@ -260,12 +267,12 @@ fn run(
         Ok(r) => r.map(|r| r.0),
         Err(code) => return code,
     };
-    let input = algorithms::Input { mesh, reference };
+    let input = Input { mesh, reference };
     let control = StderrProgress {
         last: std::sync::Mutex::new(None),
     };
     let start = Instant::now();
-    let outcome = match algorithms::run(kind, &input, &params, &control) {
+    let outcome = match spec.run(&input, &control) {
         Ok(o) => o,
         Err(e @ (algorithms::AlgoError::InvalidParam { .. } | algorithms::AlgoError::Input(_))) => {
             eprintln!("flatmesh: {e}");
@@ -277,16 +284,21 @@ fn run(
         }
     };
     let seconds = start.elapsed().as_secs_f64();
-    if let Some(serde_json::Value::Array(ws)) = outcome.summary.get("job_warnings") {
-        for w in ws.iter().filter_map(|w| w.as_str()) {
-            eprintln!("flatmesh: warning: {w}");
-        }
+    for w in outcome.figures.warnings() {
+        eprintln!("flatmesh: warning: {w}");
+    }
+    for w in &outcome.pattern_warnings {
+        eprintln!("flatmesh: warning: patterns of the output: {w}");
+    }
+    if let Some(why) = &outcome.patterns_unavailable {
+        eprintln!("flatmesh: warning: the output could not be flattened: {why}");
     }
     if let Err(e) = std::fs::create_dir_all(out) {
         eprintln!("flatmesh: cannot create {}: {e}", out.display());
         return ExitCode::FAILURE;
     }
-    for a in io::artifacts::render(&input.mesh, &outcome, &warnings, seconds) {
+    let rendered = artifacts::render(spec.kind(), &input.mesh, &outcome, &warnings, seconds);
+    for a in rendered.artifacts {
         let path = out.join(&a.name);
         if let Err(e) = std::fs::write(&path, &a.bytes) {
             eprintln!("flatmesh: cannot write {}: {e}", path.display());
@@ -294,8 +306,11 @@ fn run(
         }
         println!("{}", path.display());
     }
-    if outcome.summary.get("converged") == Some(&serde_json::Value::Bool(false)) {
-        eprintln!("flatmesh: {}", not_converged_line(kind, &outcome.summary));
+    if outcome.figures.converged() == Some(false) {
+        eprintln!(
+            "flatmesh: {}",
+            not_converged_line(kind, &outcome.figures, rendered.max_flattenability)
+        );
         return ExitCode::from(NOT_CONVERGED);
     }
     ExitCode::SUCCESS
@@ -304,29 +319,19 @@ fn run(
 /// Exit status of `run` when the job ran and wrote its results but did not converge.
 const NOT_CONVERGED: u8 = 3;
 
-/// One line for stderr: the ϖ_max reached, why the run ended and the stuck vertices.
-fn not_converged_line(kind: &str, summary: &serde_json::Map<String, serde_json::Value>) -> String {
-    let stuck: Vec<String> = summary
-        .get("stuck_vertices")
-        .and_then(|s| s.as_array())
-        .map(|a| a.iter().map(|v| v.to_string()).collect())
-        .unwrap_or_default();
+/// One line for stderr: the ϖ_max reached (measured on the output), why the run ended and the
+/// stuck vertices.
+fn not_converged_line(kind: &str, figures: &flatmesh::jobs::Figures, varpi_max: f64) -> String {
+    let stuck = figures.stuck_vertices();
     let shown = stuck
         .iter()
         .take(10)
-        .cloned()
+        .map(|v| v.to_string())
         .collect::<Vec<_>>()
         .join(", ");
     format!(
-        "{kind} did not converge: ϖ_max {} rad reached ({}); {} stuck vertices{}{}",
-        summary
-            .get("max_flattenability")
-            .and_then(|v| v.as_f64())
-            .map_or("?".into(), |w| format!("{w:.3e}")),
-        summary
-            .get("stop_reason")
-            .and_then(|v| v.as_str())
-            .unwrap_or("unknown"),
+        "{kind} did not converge: ϖ_max {varpi_max:.3e} rad reached ({}); {} stuck vertices{}{}",
+        figures.stop_reason().unwrap_or("unknown"),
         stuck.len(),
         if stuck.is_empty() { "" } else { ": " },
         if stuck.len() > 10 {

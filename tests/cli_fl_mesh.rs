@@ -92,11 +92,11 @@ fn check_run(name: &str, sets: &[&str]) -> usize {
         .into_iter()
         .fold(0.0, f64::max);
     assert!(w <= 1e-6, "ϖ_max {w:e} recomputed from mesh.obj");
-    assert_eq!(rep["converged"], serde_json::json!(true));
+    assert_eq!(rep["job"]["converged"], serde_json::json!(true));
 
     // The fields, with their shapes and what they must agree with.
-    let iters = rep["iterations"].as_u64().unwrap() as usize;
-    let hist = rep["history"].as_array().unwrap();
+    let iters = rep["job"]["iterations"].as_u64().unwrap() as usize;
+    let hist = rep["job"]["history"].as_array().unwrap();
     assert!(iters > 0 && hist.len() == iters);
     for (k, h) in hist.iter().enumerate() {
         assert_eq!(h["iteration"].as_u64().unwrap() as usize, k + 1);
@@ -108,8 +108,8 @@ fn check_run(name: &str, sets: &[&str]) -> usize {
         .into_iter()
         .fold(0.0, f64::max);
     assert!((hist[0]["max_flattenability"].as_f64().unwrap() - w0).abs() < 1e-12);
-    let refined = rep["refined"].as_array().unwrap();
-    assert!(rep["seconds"].as_f64().unwrap() > 0.0);
+    let refined = rep["job"]["refined"].as_array().unwrap();
+    assert!(rep["job"]["seconds"].as_f64().unwrap() > 0.0);
     assert_eq!(
         rep["vertices"].as_u64().unwrap() as usize,
         out.num_vertices()
@@ -143,8 +143,12 @@ fn check_run(name: &str, sets: &[&str]) -> usize {
 
     // Distance: vertex-to-surface both ways is at most the nearest-vertex distance both ways;
     // relative is over the input's bounding-box diagonal.
-    let hd = rep["hausdorff_to_input"]["absolute"].as_f64().unwrap();
-    let rel = rep["hausdorff_to_input"]["relative"].as_f64().unwrap();
+    let hd = rep["job"]["hausdorff_to_input"]["absolute"]
+        .as_f64()
+        .unwrap();
+    let rel = rep["job"]["hausdorff_to_input"]["relative"]
+        .as_f64()
+        .unwrap();
     let bound = nearest_vertex_max(&out, &inp).max(nearest_vertex_max(&inp, &out));
     assert!(hd > 0.0 && hd <= bound * (1.0 + 1e-9), "{hd} vs {bound}");
     let (lo, hi) = inp.bbox();
@@ -216,6 +220,6 @@ fn unconverged_run_exits_3_and_says_why() {
     assert!(line.contains(&format!("{stuck} stuck vertices")), "{line}");
     let report: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.join("report.json")).unwrap()).unwrap();
-    assert_eq!(report["converged"], serde_json::json!(false));
+    assert_eq!(report["job"]["converged"], serde_json::json!(false));
     std::fs::remove_dir_all(&dir).unwrap();
 }

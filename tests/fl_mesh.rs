@@ -3,7 +3,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use flatmesh::algorithms::fl_mesh::{self, Params, Until};
-use flatmesh::algorithms::{self, AlgoError, Control, Progress, Silent};
+use flatmesh::algorithms::{AlgoError, Control, Progress, Silent};
 use flatmesh::geometry;
 use flatmesh::mesh::{Mesh, RawMesh, VertexKind};
 use std::path::Path;
@@ -25,7 +25,7 @@ fn max_varpi(mesh: &Mesh) -> f64 {
 fn check_converges(name: &str, mesh: &Mesh) -> serde_json::Map<String, serde_json::Value> {
     let out = fl_mesh::run(mesh, &Params::default(), &Silent::default()).expect("runs");
     let m = out.mesh.expect("a mesh");
-    let s = out.summary;
+    let s = sj(&out.summary);
     let w = max_varpi(&m);
     assert!(w <= 1e-6, "{name}: ϖ_max {w:e} measured on the output");
     assert_eq!(s["converged"], serde_json::json!(true), "{name}");
@@ -144,12 +144,15 @@ fn tshirt_cut_short_ends_honestly() {
     let out = fl_mesh::run(&m, &p, &Silent::default()).expect("runs");
     let o = out.mesh.unwrap();
     let w = max_varpi(&o);
-    let conv = out.summary["converged"].as_bool().unwrap();
+    let conv = sj(&out.summary)["converged"].as_bool().unwrap();
     assert_eq!(conv, w <= 1e-6);
     if !conv {
         let theta = geometry::angle_sums(&o);
         let varpi = geometry::flattenability(&o, &theta);
-        let stuck = out.summary["stuck_vertices"].as_array().unwrap();
+        let stuck = sj(&out.summary)["stuck_vertices"]
+            .as_array()
+            .unwrap()
+            .clone();
         assert!(!stuck.is_empty());
         for v in stuck {
             assert!(varpi[v.as_u64().unwrap() as usize] > 1e-6);
@@ -157,10 +160,10 @@ fn tshirt_cut_short_ends_honestly() {
     }
     assert!(!conv, "5 iterations were enough?");
     assert_eq!(
-        out.summary["stop_reason"],
+        sj(&out.summary)["stop_reason"],
         serde_json::json!("max_iterations")
     );
-    assert!(out.summary["iterations"].as_u64().unwrap() <= 5);
+    assert!(sj(&out.summary)["iterations"].as_u64().unwrap() <= 5);
 }
 
 /// An exactly developable input is returned as it is with the default stop rule (ϖ_max is
@@ -171,7 +174,7 @@ fn flattenable_input_is_left_alone_by_default() {
     assert!(max_varpi(&m) <= 1e-6);
     let out = fl_mesh::run(&m, &Params::default(), &Silent::default()).unwrap();
     let o = out.mesh.unwrap();
-    assert_eq!(out.summary["iterations"], serde_json::json!(0));
+    assert_eq!(sj(&out.summary)["iterations"], serde_json::json!(0));
     assert_eq!(o.positions(), m.positions());
 }
 
@@ -200,7 +203,7 @@ fn planar_input_moves_only_by_the_fairing() {
         ..Params::default()
     };
     let out = fl_mesh::run(&m, &p, &Silent::default()).unwrap();
-    assert_eq!(out.summary["converged"], serde_json::json!(true));
+    assert_eq!(sj(&out.summary)["converged"], serde_json::json!(true));
     let o = out.mesh.unwrap();
     assert!(max_varpi(&o) <= 1e-6);
     // Independent solution.
@@ -264,8 +267,11 @@ fn closed_surface_ends_unconverged_with_stuck_vertices() {
     };
     let m = Mesh::new(raw).unwrap().0;
     let out = fl_mesh::run(&m, &Params::default(), &Silent::default()).unwrap();
-    assert_eq!(out.summary["converged"], serde_json::json!(false));
-    let stuck = out.summary["stuck_vertices"].as_array().unwrap();
+    assert_eq!(sj(&out.summary)["converged"], serde_json::json!(false));
+    let stuck = sj(&out.summary)["stuck_vertices"]
+        .as_array()
+        .unwrap()
+        .clone();
     assert_eq!(stuck.len(), 6);
     let o = out.mesh.unwrap();
     assert!(o.positions().iter().flatten().all(|x| x.is_finite()));
@@ -298,7 +304,7 @@ fn progress_every_iteration_and_cancel_within_one() {
         cancel_after: usize::MAX,
     };
     let out = fl_mesh::run(&m, &Params::default(), &c).unwrap();
-    let iters = out.summary["iterations"].as_u64().unwrap() as usize;
+    let iters = sj(&out.summary)["iterations"].as_u64().unwrap() as usize;
     assert!(iters >= 2);
     assert_eq!(c.progress.load(Ordering::SeqCst), iters);
     let c = Counting {
@@ -316,20 +322,20 @@ fn progress_every_iteration_and_cancel_within_one() {
 fn bad_parameters_are_named() {
     let mut p = serde_json::Map::new();
     p.insert("w3".into(), serde_json::json!(1.0));
-    match algorithms::validate("fl-mesh", &p) {
+    match validate(&p) {
         Err(AlgoError::InvalidParam { key, .. }) => assert_eq!(key, "w3"),
         other => panic!("{other:?}"),
     }
     let mut p = serde_json::Map::new();
     p.insert("w2".into(), serde_json::json!(-1.0));
-    match algorithms::validate("fl-mesh", &p) {
+    match validate(&p) {
         Err(AlgoError::InvalidParam { key, .. }) => assert_eq!(key, "w2"),
         other => panic!("{other:?}"),
     }
     let mut p = serde_json::Map::new();
     p.insert("step_rule".into(), serde_json::json!("fixed"));
     p.insert("max_iterations".into(), serde_json::json!(5));
-    assert!(algorithms::validate("fl-mesh", &p).is_ok());
+    assert!(validate(&p).is_ok());
 }
 
 /// The paper's fixed damping τ = 0.25 still works (slowly) and is what `step_rule = fixed`
@@ -343,13 +349,13 @@ fn fixed_rule_takes_tau_steps() {
         ..Params::default()
     };
     let out = fl_mesh::run(&m, &p, &Silent::default()).unwrap();
-    let h = out.summary["history"].as_array().unwrap();
+    let h = sj(&out.summary)["history"].as_array().unwrap().clone();
     assert!(h
         .iter()
         .all(|r| r["step_length"] == serde_json::json!(0.25)));
     let merit = fl_mesh::run(&m, &Params::default(), &Silent::default()).unwrap();
     assert!(
-        merit.summary["iterations"].as_u64() < out.summary["iterations"].as_u64(),
+        sj(&merit.summary)["iterations"].as_u64() < sj(&out.summary)["iterations"].as_u64(),
         "the merit rule needs fewer iterations"
     );
 }
@@ -387,7 +393,7 @@ fn closest_anchor_converges() {
         ..Params::default()
     };
     let out = fl_mesh::run(&m, &p, &Silent::default()).unwrap();
-    assert_eq!(out.summary["converged"], serde_json::json!(true));
+    assert_eq!(sj(&out.summary)["converged"], serde_json::json!(true));
     assert!(max_varpi(&out.mesh.unwrap()) <= 1e-6);
 }
 
@@ -404,9 +410,12 @@ fn curved_developable_input_stays_flattenable_when_faired() {
         ..Params::default()
     };
     let out = fl_mesh::run(&m, &p, &Silent::default()).unwrap();
-    assert_eq!(out.summary["converged"], serde_json::json!(true));
-    assert_eq!(out.summary["stop_reason"], serde_json::json!("stationary"));
-    assert!(out.summary["refined"].as_array().unwrap().is_empty());
+    assert_eq!(sj(&out.summary)["converged"], serde_json::json!(true));
+    assert_eq!(
+        sj(&out.summary)["stop_reason"],
+        serde_json::json!("stationary")
+    );
+    assert!(sj(&out.summary)["refined"].as_array().unwrap().is_empty());
     let o = out.mesh.unwrap();
     assert_eq!(o.num_vertices(), m.num_vertices());
     assert!(max_varpi(&o) <= 1e-6, "{}", max_varpi(&o));
@@ -442,7 +451,7 @@ fn obstructed_input_ends_truthfully() {
     let out = fl_mesh::run(&m, &p, &Silent::default()).unwrap();
     let o = out.mesh.unwrap();
     assert!(o.positions().iter().flatten().all(|x| x.is_finite()));
-    let s = &out.summary;
+    let s = &sj(&out.summary);
     let w = max_varpi(&o);
     assert_eq!(
         s["converged"].as_bool().unwrap(),
@@ -492,7 +501,28 @@ fn lu_factorisation_also_converges() {
             ..Params::default()
         };
         let out = fl_mesh::run(&m, &p, &Silent::default()).unwrap();
-        assert_eq!(out.summary["converged"], serde_json::json!(true), "{name}");
+        assert_eq!(
+            sj(&out.summary)["converged"],
+            serde_json::json!(true),
+            "{name}"
+        );
         assert!(max_varpi(&out.mesh.unwrap()) <= 1e-6, "{name}");
+    }
+}
+
+/// fl-mesh's summary as report.json shows it.
+fn sj(s: &fl_mesh::Summary) -> serde_json::Map<String, serde_json::Value> {
+    match serde_json::to_value(s) {
+        Ok(serde_json::Value::Object(o)) => o,
+        other => panic!("summary is not an object: {other:?}"),
+    }
+}
+
+/// The registry's check of fl-mesh parameters, as the service and the CLI run it.
+fn validate(p: &serde_json::Map<String, serde_json::Value>) -> Result<(), AlgoError> {
+    match flatmesh::jobs::JobSpec::parse("fl-mesh", p) {
+        Ok(_) => Ok(()),
+        Err(flatmesh::jobs::SpecError::Params(e)) => Err(e),
+        Err(other) => panic!("{other}"),
     }
 }

@@ -487,9 +487,9 @@ fn two_holes_keep_every_loop_and_cut_copies_coincide() {
     }
     let bl = boundary_rel_error(&mesh, piece);
     assert!(bl <= 1e-9, "{bl}");
-    let solver = &out.summary["pieces"][0]["solver"];
-    let coincide = solver["cut_coincidence"].as_f64().unwrap();
-    assert_eq!(solver["cut_paths"], 2);
+    let solver = &out.summary.pieces[0].solver;
+    let coincide = solver.cut_coincidence;
+    assert_eq!(solver.cut_paths, 2);
     assert!(coincide <= 1e-9, "cut copies apart by {coincide}");
     let want: Vec<[f64; 2]> = piece
         .vertex_ids
@@ -543,8 +543,8 @@ fn curved_patch_with_two_holes() {
     let mesh = mesh_of(pos, tris);
     // by default the holes, which enclose curvature, are cut open to the rim
     let auto = flatten::run(&mesh, &Params::default(), &Silent::default()).unwrap();
-    let k = &auto.summary["pieces"][0]["solver"]["enclosed_curvature"];
-    println!("curved two holes: enclosed curvature {k}");
+    let k = &auto.summary.pieces[0].solver.enclosed_curvature;
+    println!("curved two holes: enclosed curvature {k:?}");
     assert_eq!(auto.patterns.unwrap().pieces[0].boundary_loops.len(), 1);
     let params = Params {
         cuts: flatten::cut::Cuts::Virtual,
@@ -559,12 +559,12 @@ fn curved_patch_with_two_holes() {
         assert!((l2 - l3).abs() / l3 <= 1e-9, "loop {l2} vs {l3}");
     }
     let bl = boundary_rel_error(&mesh, piece);
-    let solver = &out.summary["pieces"][0]["solver"];
-    let coincide = solver["cut_coincidence"].as_f64().unwrap();
-    println!("curved two holes: boundary {bl:.3e}, coincidence {coincide:.3e}, solver {solver}");
+    let solver = &out.summary.pieces[0].solver;
+    let coincide = solver.cut_coincidence;
+    println!("curved two holes: boundary {bl:.3e}, coincidence {coincide:.3e}, solver {solver:?}");
     assert!(bl <= 1e-9);
     assert!(coincide <= 1e-9);
-    assert_eq!(solver["converged"], true);
+    assert!(solver.converged);
     assert_eq!(piece.measures["overlap"], 0);
 }
 
@@ -610,18 +610,18 @@ fn unflattenable_piece_is_named_in_a_warning() {
         ok.patterns.unwrap().pieces[0].measures["flipped_triangles"],
         0
     );
-    assert!(ok.summary["job_warnings"].as_array().unwrap().is_empty());
+    assert!(ok.summary.job_warnings.is_empty());
     let Some(shirt) = shared("garment/diffavatar_tshirt.obj") else {
         return;
     };
     let out = flatten::run(&shirt, &Params::default(), &Silent::default()).unwrap();
     let piece = &out.patterns.as_ref().unwrap().pieces[0];
     let flips = piece.measures["flipped_triangles"].as_u64().unwrap();
-    let ws = out.summary["job_warnings"].as_array().unwrap();
+    let ws = &out.summary.job_warnings;
     println!("t-shirt: {flips} flips, warnings {ws:?}");
     assert_eq!(flips, 0);
     assert_eq!(ws.len(), 1);
-    let w = ws[0].as_str().unwrap();
+    let w = &ws[0];
     assert!(w.contains(&format!("piece `{}`", piece.patch)) && w.contains("not developable"));
     assert!(w.contains("area distortion") && w.contains("ϖ_max"));
     let paper = Params {
@@ -632,7 +632,7 @@ fn unflattenable_piece_is_named_in_a_warning() {
     let out = flatten::run(&shirt, &paper, &Silent::default()).unwrap();
     let piece = &out.patterns.as_ref().unwrap().pieces[0];
     assert!(piece.measures["flipped_triangles"].as_u64().unwrap() > 0);
-    let w = out.summary["job_warnings"][0].as_str().unwrap();
+    let w = &out.summary.job_warnings[0];
     assert!(w.contains(&format!("piece `{}`", piece.patch)) && w.contains("flipped"));
 }
 
@@ -815,7 +815,10 @@ fn exports_read_back() {
 fn params_are_checked() {
     let bad = |json: &str| {
         let m: serde_json::Map<String, serde_json::Value> = serde_json::from_str(json).unwrap();
-        algorithms::validate("flatten", &m)
+        flatmesh::jobs::JobSpec::parse("flatten", &m).map_err(|e| match e {
+            flatmesh::jobs::SpecError::Params(a) => a,
+            other => panic!("{other}"),
+        })
     };
     assert!(bad(r#"{}"#).is_ok());
     assert!(bad(r#"{"method": "lscm", "unit": "in", "input_unit": "cm"}"#).is_ok());
@@ -885,10 +888,10 @@ fn cli_writes_patterns() {
     }
     let rep: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
-    assert_eq!(rep["method"], "lscm");
-    assert_eq!(rep["pieces"].as_array().unwrap().len(), 2);
-    assert_eq!(rep["seams"].as_array().unwrap().len(), 1);
-    assert!(rep["timings"]["total_s"].as_f64().unwrap() >= 0.0);
+    assert_eq!(rep["job"]["method"], "lscm");
+    assert_eq!(rep["job"]["pieces"].as_array().unwrap().len(), 2);
+    assert_eq!(rep["job"]["seams"].as_array().unwrap().len(), 1);
+    assert!(rep["job"]["timings"]["total_s"].as_f64().unwrap() >= 0.0);
     let svg = std::fs::read_to_string(out.join("patterns.svg")).unwrap();
     assert!(svg.contains(r#"cm" height=""#));
     let bad = std::process::Command::new(env!("CARGO_BIN_EXE_flatmesh"))
@@ -1098,11 +1101,8 @@ fn random_patches_keep_boundary_lengths() {
                 .all(|q| q[0].is_finite() && q[1].is_finite()));
             let bl = boundary_rel_error(&mesh, piece);
             assert!(bl <= 1e-9, "case {case}: boundary {bl}");
-            let s = &out.summary["pieces"][k]["solver"];
-            assert!(
-                s["cut_coincidence"].as_f64().unwrap() <= 1e-9,
-                "case {case}: {s}"
-            );
+            let s = &out.summary.pieces[k].solver;
+            assert!(s.cut_coincidence <= 1e-9, "case {case}: {s:?}");
         }
     }
 }
@@ -1212,9 +1212,7 @@ fn fixtures_flatten_exactly() {
                 let (l2, l3) = (loop_len_2d(piece, lp), loop_len_3d(&mesh, piece, lp));
                 assert!((l2 - l3).abs() / l3 <= 1e-9, "{name}: loop {l2} vs {l3}");
             }
-            let coincide = out.summary["pieces"][k]["solver"]["cut_coincidence"]
-                .as_f64()
-                .unwrap();
+            let coincide = out.summary.pieces[k].solver.cut_coincidence;
             let un = unfold(&mesh, piece);
             let err = rigid_fit_max_error(&piece.uv, &un) / diameter2(&un);
             println!(

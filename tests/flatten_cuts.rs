@@ -169,9 +169,14 @@ fn sphere(b: &mut Builder, levels: usize, c: [f64; 3], r: f64, patch: u32) {
     }
 }
 
+/// The patterns and the summary as report.json shows it.
 fn run(mesh: &Mesh, params: &Params) -> (Patterns, serde_json::Map<String, serde_json::Value>) {
     let out = flatten::run(mesh, params, &Silent::default()).expect("flatten");
-    (out.patterns.expect("patterns"), out.summary)
+    let summary = match serde_json::to_value(&out.summary) {
+        Ok(serde_json::Value::Object(o)) => o,
+        other => panic!("summary is not an object: {other:?}"),
+    };
+    (out.patterns.expect("patterns"), summary)
 }
 
 fn d2(a: [f64; 2], b: [f64; 2]) -> f64 {

@@ -224,35 +224,42 @@ fn routes_and_openapi_agree() {
         .collect();
     assert_eq!(
         kinds,
-        flatmesh::algorithms::KINDS,
+        flatmesh::jobs::Kind::names(),
         "job kinds in openapi.yaml"
     );
     // The served document is the file.
 }
 
-/// The defaults openapi.yaml documents are the code's: every kind's `Params::default()`,
-/// serialised, has exactly the schema's properties, each with the documented default.
+/// Every kind of the registry has its parameter schema in openapi.yaml (through `KindParams`),
+/// and the defaults it documents are the code's: the kind's parameters parsed from `{}`,
+/// serialised, have exactly the schema's properties, each with the documented default.
 #[test]
 fn openapi_parameter_defaults_are_the_code_defaults() {
-    use flatmesh::algorithms::{fl_mesh, flatten, subdivide};
+    use flatmesh::jobs::{JobSpec, Kind};
     let doc = openapi();
     let schemas = &doc["components"]["schemas"];
-    let cases = [
-        (
-            "FlattenParams",
-            serde_json::to_value(flatten::Params::default()).unwrap(),
-        ),
-        (
-            "FlMeshParams",
-            serde_json::to_value(fl_mesh::Params::default()).unwrap(),
-        ),
-        (
-            "SubdivideParams",
-            serde_json::to_value(subdivide::Params::default()).unwrap(),
-        ),
-    ];
-    for (name, code) in cases {
-        let props = schemas[name]["properties"].as_object().unwrap();
+    let per_kind = schemas["KindParams"]["allOf"].as_array().unwrap();
+    assert_eq!(
+        per_kind.len(),
+        Kind::ALL.len(),
+        "KindParams has one entry per kind"
+    );
+    for kind in Kind::ALL {
+        let entry = per_kind
+            .iter()
+            .find(|e| e["if"]["properties"]["kind"]["const"] == kind.name())
+            .unwrap_or_else(|| panic!("KindParams has no entry for `{}`", kind.name()));
+        let name = entry["then"]["properties"]["params"]["$ref"]
+            .as_str()
+            .unwrap()
+            .trim_start_matches("#/components/schemas/");
+        let code = JobSpec::parse(kind.name(), &serde_json::Map::new())
+            .unwrap()
+            .params();
+        let props = schemas[name]["properties"]
+            .as_object()
+            .cloned()
+            .unwrap_or_default();
         let code = code.as_object().unwrap();
         let mut a: Vec<&String> = props.keys().collect();
         let mut b: Vec<&String> = code.keys().collect();
@@ -271,6 +278,25 @@ fn openapi_parameter_defaults_are_the_code_defaults() {
             }
         }
         check(name, &Value::Object(code.clone()));
+    }
+}
+
+/// README's list of kinds and the CLI's `run --help` name every kind of the registry.
+#[test]
+fn readme_and_cli_list_every_kind() {
+    let readme = std::fs::read_to_string("README.md").unwrap();
+    let help = std::process::Command::new(env!("CARGO_BIN_EXE_flatmesh"))
+        .args(["run", "--help"])
+        .output()
+        .unwrap();
+    let help = String::from_utf8_lossy(&help.stdout);
+    for kind in flatmesh::jobs::Kind::ALL {
+        let k = kind.name();
+        assert!(
+            readme.contains(&format!("`{k}`")),
+            "README does not name `{k}`"
+        );
+        assert!(help.contains(k), "run --help does not name {k}");
     }
 }
 
@@ -490,7 +516,7 @@ async fn every_kind_end_to_end() {
     let s = Server::start(&tmp("kinds"), &[]);
     let c = client();
     assert_eq!(
-        flatmesh::algorithms::KINDS,
+        flatmesh::jobs::Kind::names(),
         ["report", "flatten", "fl-mesh", "subdivide"]
     );
     let bytes = fixture("tube_two_panels");
@@ -674,8 +700,9 @@ async fn every_kind_end_to_end() {
         "Report",
     )
     .await;
-    assert_eq!(result["converged"], true, "{result}");
-    assert!(result["iterations"].as_u64().unwrap() >= 1);
+    assert_eq!(result["job"]["converged"], true, "{result}");
+    assert_eq!(result["job"]["kind"], "fl-mesh", "{result}");
+    assert!(result["job"]["iterations"].as_u64().unwrap() >= 1);
     let b = c
         .get(s.url(&format!("/v1/jobs/{id}/mesh?format=obj")))
         .send()
@@ -794,7 +821,11 @@ async fn every_kind_end_to_end() {
         "Report",
     )
     .await;
-    assert_eq!(result["levels"].as_array().unwrap().len(), 1, "{result}");
+    assert_eq!(
+        result["job"]["levels"].as_array().unwrap().len(),
+        1,
+        "{result}"
+    );
     for (f, fmt) in [
         ("obj", flatmesh::io::Format::Obj),
         ("glb", flatmesh::io::Format::Glb),
@@ -815,7 +846,7 @@ async fn every_kind_end_to_end() {
                 .fold(0.0, f64::max);
             assert!(w <= 1e-6, "level 1 ϖ_max {w}");
             assert_eq!(
-                result["levels"][0]["vertices"].as_u64().unwrap() as usize,
+                result["job"]["levels"][0]["vertices"].as_u64().unwrap() as usize,
                 lv.num_vertices()
             );
         }
@@ -1656,4 +1687,154 @@ async fn retention_cors_compression() {
 
 fn openapi_len() -> usize {
     std::fs::metadata("src/service/openapi.yaml").unwrap().len() as usize
+}
+
+/// A reference body given to a kind that does not use one is refused (422 naming the field),
+/// in a JSON submit, in a multipart submit and on the command line; nothing is stored.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn reference_refused_by_kinds_without_one() {
+    let s = Server::start(&tmp("reference"), &[]);
+    let c = client();
+    let m = upload(&c, &s, fixture("cylinder")).await;
+    let mid = m["id"].as_str().unwrap();
+    for kind in flatmesh::jobs::Kind::ALL {
+        if kind.reference() != flatmesh::jobs::Reference::None {
+            continue;
+        }
+        let r = c
+            .post(s.url("/v1/jobs"))
+            .json(&json!({"kind": kind.name(), "mesh_id": mid, "reference_mesh_id": mid}))
+            .send()
+            .await
+            .unwrap();
+        let p = problem(r, 422).await;
+        assert_eq!(p["field"], "reference_mesh_id", "{p}");
+        assert!(p["detail"].as_str().unwrap().contains(kind.name()), "{p}");
+    }
+    let form = reqwest::multipart::Form::new()
+        .text("job", r#"{"kind": "report"}"#)
+        .part(
+            "mesh",
+            reqwest::multipart::Part::bytes(fixture("cylinder"))
+                .file_name("a.obj")
+                .mime_str("model/obj")
+                .unwrap(),
+        )
+        .part(
+            "reference",
+            reqwest::multipart::Part::bytes(fixture("cylinder"))
+                .file_name("b.obj")
+                .mime_str("model/obj")
+                .unwrap(),
+        );
+    let r = c
+        .post(s.url("/v1/jobs"))
+        .multipart(form)
+        .send()
+        .await
+        .unwrap();
+    let p = problem(r, 422).await;
+    assert_eq!(p["field"], "reference", "{p}");
+    let meshes = std::fs::read_dir(s.dir.join("blobs/meshes"))
+        .map(|d| d.count())
+        .unwrap_or(0);
+    assert_eq!(meshes, 1, "only the first upload is stored");
+    let o = Command::new(env!("CARGO_BIN_EXE_flatmesh"))
+        .args(["run", "report", "fixtures/cylinder.obj", "--reference"])
+        .arg("fixtures/cylinder.obj")
+        .arg("--out")
+        .arg(tmp("reference-cli"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("does not use a reference body"));
+}
+
+/// report.json without what depends on the clock: `seconds`, `timings` and `seconds_*`.
+fn without_timings(v: &mut Value) {
+    match v {
+        Value::Object(o) => {
+            o.retain(|k, _| k != "seconds" && k != "timings" && !k.starts_with("seconds_"));
+            o.values_mut().for_each(without_timings);
+        }
+        Value::Array(a) => a.iter_mut().for_each(without_timings),
+        _ => {}
+    }
+}
+
+/// `flatmesh run KIND` and the same job through the service give the same files: the same
+/// names, every file byte for byte, report.json equal once the clock's figures are removed.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn cli_and_service_write_the_same_files() {
+    let s = Server::start(&tmp("same-files"), &[]);
+    let c = client();
+    let cases = [
+        ("report", "cylinder_noisy", json!({})),
+        ("flatten", "tube_two_panels", json!({"unit": "cm"})),
+        ("fl-mesh", "cylinder_noisy", json!({})),
+        ("subdivide", "cone_noisy", json!({"levels": 1})),
+    ];
+    for (kind, name, params) in cases {
+        let m = upload(&c, &s, fixture(name)).await;
+        let j = submit(
+            &c,
+            &s,
+            json!({"kind": kind, "mesh_id": m["id"], "params": params}),
+        )
+        .await;
+        let id = j["id"].as_str().unwrap();
+        let done = wait_for(&c, &s, id, &["succeeded", "failed"]).await;
+        assert_eq!(done["status"], "succeeded", "{done}");
+        let out = tmp(&format!("same-files-cli-{kind}"));
+        let _ = std::fs::remove_dir_all(&out);
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_flatmesh"));
+        cmd.args(["run", kind, &format!("fixtures/{name}.obj"), "--out"])
+            .arg(&out);
+        for (k, v) in params.as_object().unwrap() {
+            cmd.args(["--set", &format!("{k}={v}")]);
+        }
+        let o = cmd.output().unwrap();
+        assert!(
+            o.status.success(),
+            "{kind}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let listing = |dir: &Path| -> Vec<String> {
+            let mut v: Vec<String> = std::fs::read_dir(dir)
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .collect();
+            v.sort();
+            v
+        };
+        let blobs = s.dir.join(format!("blobs/jobs/{id}"));
+        let names = listing(&out);
+        assert_eq!(names, listing(&blobs), "{kind}: file names");
+        assert!(
+            names.contains(&"mesh.gltf".to_string()),
+            "{kind}: {names:?}"
+        );
+        println!("{kind}: {} files compared: {names:?}", names.len());
+        for f in &names {
+            let (a, b) = (
+                std::fs::read(out.join(f)).unwrap(),
+                std::fs::read(blobs.join(f)).unwrap(),
+            );
+            if f == "report.json" {
+                let mut a: Value = serde_json::from_slice(&a).unwrap();
+                let mut b: Value = serde_json::from_slice(&b).unwrap();
+                assert_eq!(a["job"]["kind"], kind);
+                without_timings(&mut a);
+                without_timings(&mut b);
+                assert_eq!(a, b, "{kind}: report.json");
+            } else {
+                assert!(
+                    a == b,
+                    "{kind}: {f} differs ({} vs {} bytes)",
+                    a.len(),
+                    b.len()
+                );
+            }
+        }
+    }
 }

@@ -4,7 +4,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use flatmesh::algorithms::subdivide::{self, Curve, Params};
-use flatmesh::algorithms::{self, AlgoError, Silent};
+use flatmesh::algorithms::{AlgoError, Silent};
 use flatmesh::geometry;
 use flatmesh::mesh::{Mesh, RawMesh, VertexKind};
 use std::collections::HashMap;
@@ -320,10 +320,10 @@ fn two_levels_on_fixtures_are_flattenable() {
                 );
             }
         }
-        let levels = out.summary["levels"].as_array().unwrap();
-        for (r, lv) in levels.iter().zip(&out.levels) {
-            assert_eq!(r["vertices"].as_u64().unwrap() as usize, lv.num_vertices());
-            assert_eq!(r["max_flattenability"].as_f64().unwrap(), max_varpi(lv));
+        assert_eq!(out.summary.levels.len(), out.levels.len());
+        for (r, lv) in out.summary.levels.iter().zip(&out.levels) {
+            assert_eq!(r.vertices, lv.num_vertices());
+            assert_eq!(r.max_flattenability, max_varpi(lv));
         }
     }
 }
@@ -333,14 +333,15 @@ fn bad_parameters_are_named() {
     let m = fixture("cone_noisy");
     let key_of = |params: serde_json::Value| -> String {
         let map = params.as_object().unwrap().clone();
-        let err = match algorithms::validate("subdivide", &map) {
-            Err(e) => e,
-            Ok(()) => {
-                let input = algorithms::Input {
+        let err = match flatmesh::jobs::JobSpec::parse("subdivide", &map) {
+            Err(flatmesh::jobs::SpecError::Params(e)) => e,
+            Err(other) => panic!("{other}"),
+            Ok(spec) => {
+                let input = flatmesh::jobs::Input {
                     mesh: m.clone(),
                     reference: None,
                 };
-                algorithms::run("subdivide", &input, &map, &Silent::default()).expect_err("refused")
+                spec.run(&input, &Silent::default()).expect_err("refused")
             }
         };
         match err {
@@ -455,9 +456,9 @@ fn cli_run_subdivide() {
         "seconds",
         "levels",
     ] {
-        assert!(report.get(k).is_some(), "report.json lacks {k}");
+        assert!(report["job"].get(k).is_some(), "report.json lacks job.{k}");
     }
-    assert_eq!(report["levels"].as_array().unwrap().len(), 2);
+    assert_eq!(report["job"]["levels"].as_array().unwrap().len(), 2);
     let input = flatmesh::io::load_path(std::path::Path::new("fixtures/cone_noisy.obj"))
         .unwrap()
         .0;

@@ -104,7 +104,6 @@ use crate::geometry::{corner_angle, corner_angle_gradient};
 use crate::linalg::{LdltSolver, LinalgError, LuSolver};
 use crate::mesh::{cross, dot, sub, Mesh, RawMesh, VertexKind, NONE};
 use serde::{Deserialize, Serialize};
-use serde_json::json;
 use std::f64::consts::{PI, TAU};
 
 /// Step-length rule (see the module doc).
@@ -342,34 +341,32 @@ pub struct Report {
     pub free_vertices: usize,
 }
 
+/// What `fl-mesh` reports: the solver's [`Report`] and the distance moved.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct Summary {
+    /// The solver's figures.
+    #[serde(flatten)]
+    pub report: Report,
+    /// Hausdorff distance from the output to the input.
+    pub hausdorff_to_input: super::Distance,
+}
+
 /// Run `fl-mesh`.
-pub fn run(mesh: &Mesh, params: &Params, control: &dyn Control) -> Result<Outcome, AlgoError> {
+pub fn run(
+    mesh: &Mesh,
+    params: &Params,
+    control: &dyn Control,
+) -> Result<Outcome<Summary>, AlgoError> {
     params.check()?;
     let (out, report) = solve(mesh, params, control)?;
-    let (lo, hi) = mesh.bbox();
-    let d = sub(hi, lo);
-    let diag = dot(d, d).sqrt();
-    let hd = crate::spatial::vertex_surface_hausdorff(
-        out.positions(),
-        out.triangles(),
-        mesh.positions(),
-        mesh.triangles(),
-    );
-    let mut summary = match serde_json::to_value(&report) {
-        Ok(serde_json::Value::Object(m)) => m,
-        _ => serde_json::Map::new(),
-    };
-    summary.insert(
-        "hausdorff_to_input".into(),
-        json!({
-            "absolute": hd,
-            "relative": if diag > 0.0 { hd / diag } else { 0.0 },
-        }),
-    );
+    let hausdorff_to_input = super::Distance::hausdorff(&out, mesh);
     Ok(Outcome {
         mesh: Some(out),
         patterns: None,
-        summary,
+        summary: Summary {
+            report,
+            hausdorff_to_input,
+        },
         levels: Vec::new(),
     })
 }

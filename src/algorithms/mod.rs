@@ -1,8 +1,8 @@
 //! Algorithms: one module per capability, each a pure function
 //! `run(&Mesh, &Params, &dyn Control) -> Result<Outcome, AlgoError>` that knows nothing of HTTP,
 //! files or threads (../shared/DESIGN.md). This module holds what they share: progress and
-//! cancellation ([`Control`]), typed parameters parsed from JSON, and the dispatcher by job
-//! kind used by the CLI (`flatmesh run`) and the service alike.
+//! cancellation ([`Control`]), typed parameters parsed from JSON, and the shape of an outcome.
+//! Which algorithm a job kind runs is the registry's business ([`crate::jobs`]).
 
 pub mod fl_mesh;
 pub mod flatten;
@@ -65,39 +65,52 @@ pub enum AlgoError {
         /// What is wrong.
         message: String,
     },
-    /// The job kind does not exist.
-    #[error("unknown job kind `{0}` (available: {kinds})", kinds = KINDS.join(", "))]
-    UnknownKind(String),
     /// The input cannot be processed, with the element at fault.
     #[error("{0}")]
     Input(String),
 }
 
-/// The job kinds implemented, in the order the CLI lists them.
-pub const KINDS: &[&str] = &["report", "flatten", "fl-mesh", "subdivide"];
-
-/// What a run produced: an output mesh (for optimisers), and a JSON object of
-/// algorithm-specific figures (iterations, converged, history, …) merged into `report.json`.
+/// What a run produced: an output mesh (for optimisers), flat patterns (for flattening), and
+/// the algorithm's own figures `S`, a typed struct of each algorithm (`fl_mesh::Summary`, …).
 #[derive(Debug, Clone, Default)]
-pub struct Outcome {
+pub struct Outcome<S> {
     /// The optimised mesh, when the algorithm changes the mesh.
     pub mesh: Option<Mesh>,
     /// Flat patterns, when the algorithm flattens.
     pub patterns: Option<crate::pattern::Patterns>,
-    /// Extra figures, a JSON object.
-    pub summary: serde_json::Map<String, serde_json::Value>,
+    /// The algorithm's figures (iterations, converged, history, …).
+    pub summary: S,
     /// Intermediate meshes, for algorithms that make a sequence (`subdivide`: every level's
     /// mesh, the last equal to `mesh`).
     pub levels: Vec<Mesh>,
 }
 
-/// Everything a job needs.
-#[derive(Debug, Clone)]
-pub struct Input {
-    /// The mesh to work on.
-    pub mesh: Mesh,
-    /// A reference body (for `perturb`), when given.
-    pub reference: Option<Mesh>,
+/// Hausdorff distance between an output and its input, absolute (mesh units) and relative to
+/// the input's bounding-box diagonal.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct Distance {
+    /// Mesh units.
+    pub absolute: f64,
+    /// Divided by the input's bounding-box diagonal.
+    pub relative: f64,
+}
+
+impl Distance {
+    /// Vertex-to-surface Hausdorff distance between `output` and `input`, both ways.
+    pub fn hausdorff(output: &Mesh, input: &Mesh) -> Distance {
+        let (lo, hi) = input.bbox();
+        let diag = (0..3).map(|i| (hi[i] - lo[i]).powi(2)).sum::<f64>().sqrt();
+        let absolute = crate::spatial::vertex_surface_hausdorff(
+            output.positions(),
+            output.triangles(),
+            input.positions(),
+            input.triangles(),
+        );
+        Distance {
+            absolute,
+            relative: if diag > 0.0 { absolute / diag } else { 0.0 },
+        }
+    }
 }
 
 /// Parse typed parameters from a JSON object, naming the offending key on failure. Parameter
@@ -114,34 +127,4 @@ pub fn parse_params<P: DeserializeOwned>(
         let key = if path == "." { String::new() } else { path };
         AlgoError::InvalidParam { key, message: msg }
     })
-}
-
-/// Check a job's parameters without running it (the service refuses bad jobs up front).
-pub fn validate(
-    kind: &str,
-    params: &serde_json::Map<String, serde_json::Value>,
-) -> Result<(), AlgoError> {
-    match kind {
-        "report" => parse_params::<report_job::Params>(params).map(|_| ()),
-        "flatten" => parse_params::<flatten::Params>(params)?.check(),
-        "fl-mesh" => parse_params::<fl_mesh::Params>(params)?.check(),
-        "subdivide" => parse_params::<subdivide::Params>(params)?.check(),
-        other => Err(AlgoError::UnknownKind(other.to_string())),
-    }
-}
-
-/// Run a job of `kind` on `input`.
-pub fn run(
-    kind: &str,
-    input: &Input,
-    params: &serde_json::Map<String, serde_json::Value>,
-    control: &dyn Control,
-) -> Result<Outcome, AlgoError> {
-    match kind {
-        "report" => report_job::run(&input.mesh, &parse_params(params)?, control),
-        "flatten" => flatten::run(&input.mesh, &parse_params(params)?, control),
-        "fl-mesh" => fl_mesh::run(&input.mesh, &parse_params(params)?, control),
-        "subdivide" => subdivide::run(&input.mesh, &parse_params(params)?, control),
-        other => Err(AlgoError::UnknownKind(other.to_string())),
-    }
 }

@@ -14,10 +14,11 @@
 //! Vertex numbering only grows: level k's vertices are level k−1's (including any that
 //! fl-mesh's √3 refinement added), then the new ones; input vertex i stays vertex i.
 //!
-//! The summary is the last level's fl-mesh summary (its `history`, `stuck_vertices`, …) with
-//! `iterations` and `refined` over all levels (`refined` ids in the numbering of the level they
-//! were refined in, which keeps all earlier ids), `hausdorff_to_input` against the job's input,
-//! and `levels`: per level vertices, faces, split edges, measured ϖ_max, converged, iterations.
+//! The summary ([`Summary`]) has `levels` (per level vertices, faces, split edges, measured
+//! ϖ_max, converged, iterations), `iterations` and `refined` over all levels (`refined` ids in
+//! the numbering of the level they were refined in, which keeps all earlier ids), the last
+//! level's `stop_reason`, `stuck_vertices` and `history`, and `hausdorff_to_input` against the
+//! job's input. fl-mesh is called through [`fl_mesh::solve`], typed.
 //!
 //! Where the paper is silent: a face with two split edges is cut along the shorter diagonal of
 //! the quadrilateral left over; the umbrella runs are Jacobi sweeps (every vertex updated from
@@ -29,7 +30,6 @@ use super::{fl_mesh, AlgoError, Control, Outcome, Progress};
 use crate::geometry;
 use crate::mesh::{Mesh, RawMesh, VertexKind, NONE};
 use serde::{Deserialize, Serialize};
-use serde_json::json;
 use std::collections::HashMap;
 
 /// A user-given interpolation curve of one boundary edge of the input (Fig. 8a).
@@ -284,14 +284,41 @@ impl Control for LevelControl<'_> {
     }
 }
 
+/// What `subdivide` reports.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct Summary {
+    /// Per level.
+    pub levels: Vec<LevelReport>,
+    /// The last level converged.
+    pub converged: bool,
+    /// fl-mesh iterations over all levels.
+    pub iterations: usize,
+    /// Vertices fl-mesh refined, over all levels (ids in the numbering of their level).
+    pub refined: Vec<u32>,
+    /// ϖ_max of the output, measured by `geometry`.
+    pub max_flattenability: f64,
+    /// Why the last level's fl-mesh run ended (absent when fl-mesh is off).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub stop_reason: Option<String>,
+    /// Interior vertices of the output still above fl-mesh's tolerance.
+    pub stuck_vertices: Vec<u32>,
+    /// The last level's fl-mesh iteration history.
+    pub history: Vec<fl_mesh::HistoryEntry>,
+    /// Hausdorff distance from the output to the job's input.
+    pub hausdorff_to_input: super::Distance,
+}
+
 /// Run `subdivide`.
-pub fn run(mesh: &Mesh, params: &Params, control: &dyn Control) -> Result<Outcome, AlgoError> {
+pub fn run(
+    mesh: &Mesh,
+    params: &Params,
+    control: &dyn Control,
+) -> Result<Outcome<Summary>, AlgoError> {
     params.check()?;
     let mut curves = curves_of(mesh, &params.curves)?;
     let mut current = mesh.clone();
     let mut levels = Vec::with_capacity(params.levels);
-    let mut reports = Vec::with_capacity(params.levels);
-    let mut last_summary = serde_json::Map::new();
+    let mut summary = Summary::default();
     for level in 1..=params.levels {
         let ctl = LevelControl {
             inner: control,
@@ -299,77 +326,48 @@ pub fn run(mesh: &Mesh, params: &Params, control: &dyn Control) -> Result<Outcom
             levels: params.levels,
         };
         let (split, split_edges) = subdivide_level(&current, &mut curves, params, &ctl)?;
-        let (out, summary) = if params.flatten_levels {
-            let o = fl_mesh::run(&split, &params.fl_mesh, &ctl)?;
-            (o.mesh.unwrap_or(split), o.summary)
+        let (out, fl) = if params.flatten_levels {
+            let (m, r) = fl_mesh::solve(&split, &params.fl_mesh, &ctl)?;
+            (m, Some(r))
         } else {
-            (split, serde_json::Map::new())
+            (split, None)
         };
         let theta = geometry::angle_sums(&out);
         let w = geometry::flattenability(&out, &theta)
             .into_iter()
             .fold(0.0, f64::max);
-        let converged = summary
-            .get("converged")
-            .and_then(|v| v.as_bool())
-            .unwrap_or(w <= params.fl_mesh.tolerance);
-        reports.push(LevelReport {
+        let report = LevelReport {
             level,
             vertices: out.num_vertices(),
             faces: out.num_faces(),
             split_edges,
             max_flattenability: w,
-            converged,
-            iterations: summary
-                .get("iterations")
-                .and_then(|v| v.as_u64())
-                .unwrap_or(0) as usize,
-            refined: summary
-                .get("refined")
-                .and_then(|v| serde_json::from_value(v.clone()).ok())
-                .unwrap_or_default(),
-        });
+            converged: fl
+                .as_ref()
+                .map_or(w <= params.fl_mesh.tolerance, |r| r.converged),
+            iterations: fl.as_ref().map_or(0, |r| r.iterations),
+            refined: fl.as_ref().map(|r| r.refined.clone()).unwrap_or_default(),
+        };
         control.progress(&Progress {
             stage: format!("level {level}/{} done", params.levels),
             iteration: level,
             max_flattenability: Some(w),
             step_norm: None,
         });
-        last_summary = summary;
+        summary.iterations += report.iterations;
+        summary.refined.extend_from_slice(&report.refined);
+        summary.converged = report.converged;
+        summary.max_flattenability = w;
+        summary.levels.push(report);
+        if let Some(r) = fl {
+            summary.stop_reason = Some(r.stop_reason);
+            summary.stuck_vertices = r.stuck_vertices;
+            summary.history = r.history;
+        }
         levels.push(out.clone());
         current = out;
     }
-    // The last level's fl-mesh figures, with the distance and the iteration count taken over
-    // the whole run (fl-mesh measured its distance to the level's own input).
-    let mut summary = last_summary;
-    let (lo, hi) = mesh.bbox();
-    let diag = dist(lo, hi);
-    let hd = crate::spatial::vertex_surface_hausdorff(
-        current.positions(),
-        current.triangles(),
-        mesh.positions(),
-        mesh.triangles(),
-    );
-    summary.insert(
-        "hausdorff_to_input".into(),
-        json!({"absolute": hd, "relative": if diag > 0.0 { hd / diag } else { 0.0 }}),
-    );
-    summary.insert(
-        "iterations".into(),
-        json!(reports.iter().map(|r| r.iterations).sum::<usize>()),
-    );
-    summary.insert(
-        "refined".into(),
-        json!(reports
-            .iter()
-            .flat_map(|r| r.refined.iter().copied())
-            .collect::<Vec<u32>>()),
-    );
-    summary.insert("levels".into(), json!(reports));
-    summary.insert(
-        "converged".into(),
-        json!(reports.last().is_some_and(|r| r.converged)),
-    );
+    summary.hausdorff_to_input = super::Distance::hausdorff(&current, mesh);
     Ok(Outcome {
         mesh: Some(current),
         patterns: None,

@@ -4,7 +4,6 @@
 //! multiple of the input's size. They produce a [`RawMesh`]; [`load`] validates it into a
 //! [`Mesh`].
 
-pub mod artifacts;
 pub mod gltf;
 pub mod obj;
 pub mod off;

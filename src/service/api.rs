@@ -5,8 +5,9 @@ use super::jobs::now_ms;
 use super::problem::Problem;
 use super::store::{Inserted, JobFilter, JobRecord, MeshRecord, Status};
 use super::AppState;
-use crate::algorithms::{self, AlgoError};
+use crate::algorithms::AlgoError;
 use crate::io;
+use crate::jobs::{JobSpec, Kind, SpecError};
 use axum::body::Bytes;
 use axum::extract::{Multipart, Path, Query, State};
 use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
@@ -376,21 +377,29 @@ fn parse_submit(body: &[u8], multipart: bool) -> Result<Submit, Problem> {
     })
 }
 
-/// Checks that need no database: kind, params, callback URL.
-fn validate_submit(st: &AppState, s: &Submit) -> Result<(), Problem> {
-    if let Err(e) = algorithms::validate(&s.kind, &s.params) {
-        return Err(match e {
-            AlgoError::UnknownKind(_) => Problem::invalid("kind", e.to_string()),
-            AlgoError::InvalidParam { ref key, .. } => {
-                let field = if key.is_empty() {
-                    "params".to_string()
-                } else {
-                    format!("params.{key}")
-                };
-                Problem::invalid(&field, e.to_string())
-            }
-            other => Problem::invalid("params", other.to_string()),
-        });
+/// The 422 for a job the registry refuses, naming the request field at fault.
+fn spec_problem(e: SpecError) -> Problem {
+    match e {
+        SpecError::UnknownKind(_) => Problem::invalid("kind", e.to_string()),
+        SpecError::Params(AlgoError::InvalidParam { ref key, .. }) => {
+            let field = if key.is_empty() {
+                "params".to_string()
+            } else {
+                format!("params.{key}")
+            };
+            Problem::invalid(&field, e.to_string())
+        }
+        SpecError::Params(other) => Problem::invalid("params", other.to_string()),
+        SpecError::Reference(m) => Problem::invalid("reference_mesh_id", m),
+    }
+}
+
+/// Checks that need no database: kind, params, callback URL, and (when `has_reference` is
+/// known) whether the kind takes a reference body.
+fn validate_submit(st: &AppState, s: &Submit, has_reference: Option<bool>) -> Result<(), Problem> {
+    let spec = JobSpec::parse(&s.kind, &s.params).map_err(spec_problem)?;
+    if let Some(r) = has_reference {
+        spec.check_reference(r).map_err(spec_problem)?;
     }
     if let Some(u) = &s.callback_url {
         super::webhook::check_url(u, st.webhooks.allow_private())
@@ -447,7 +456,7 @@ pub async fn submit_job(
                 )
             })?;
         submit = parse_submit(&body, false)?;
-        validate_submit(&st, &submit)?;
+        validate_submit(&st, &submit, Some(submit.reference_mesh_id.is_some()))?;
         for (field, id) in [
             ("mesh_id", submit.mesh_id.clone()),
             ("reference_mesh_id", submit.reference_mesh_id.clone()),
@@ -471,7 +480,7 @@ pub async fn submit_job(
                 "job" => {
                     let b = field.bytes().await.map_err(multipart_err)?;
                     let s = parse_submit(&b, true)?;
-                    validate_submit(&st, &s)?;
+                    validate_submit(&st, &s, None)?;
                     job = Some(s);
                 }
                 "mesh" => mesh = Some(mesh_part(field, "mesh").await?),
@@ -486,6 +495,12 @@ pub async fn submit_job(
         }
         submit =
             job.ok_or_else(|| Problem::invalid("job", "the multipart body has no `job` part"))?;
+        JobSpec::parse(&submit.kind, &submit.params)
+            .and_then(|spec| spec.check_reference(reference.is_some()))
+            .map_err(|e| match e {
+                SpecError::Reference(m) => Problem::invalid("reference", m),
+                e => spec_problem(e),
+            })?;
         let (mb, mf) =
             mesh.ok_or_else(|| Problem::invalid("mesh", "the multipart body has no `mesh` part"))?;
         hasher.update(format!("mesh={};", sha256_hex(&mb)));
@@ -657,7 +672,7 @@ pub async fn list_jobs(
         .transpose()?;
     let kind = q.get("kind").cloned();
     if let Some(k) = &kind {
-        if !algorithms::KINDS.contains(&k.as_str()) {
+        if Kind::from_name(k).is_none() {
             return Err(Problem::invalid("kind", format!("unknown job kind `{k}`")));
         }
     }
@@ -872,7 +887,7 @@ pub async fn version() -> Response {
     Json(json!({
         "name": "flatmesh",
         "version": env!("CARGO_PKG_VERSION"),
-        "kinds": algorithms::KINDS,
+        "kinds": Kind::names(),
     }))
     .into_response()
 }

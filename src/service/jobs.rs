@@ -6,8 +6,9 @@ use super::metrics::Metrics;
 use super::problem::Problem;
 use super::store::{JobRecord, Status, Store, StoreError};
 use super::webhook::Webhooks;
-use crate::algorithms::{self, AlgoError, Control, Progress};
+use crate::algorithms::{AlgoError, Control, Progress};
 use crate::io;
+use crate::jobs::{artifacts, Input, JobOutcome, JobSpec};
 use axum::http::StatusCode;
 use std::collections::HashMap;
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -49,13 +50,8 @@ pub struct Live {
     pub progress: Mutex<Option<serde_json::Value>>,
 }
 
-/// The function that runs a job ([`algorithms::run`]; tests substitute their own).
-pub type Runner = fn(
-    &str,
-    &algorithms::Input,
-    &serde_json::Map<String, serde_json::Value>,
-    &dyn Control,
-) -> Result<algorithms::Outcome, AlgoError>;
+/// The function that runs a job ([`JobSpec::run`]; tests substitute their own).
+pub type Runner = fn(&JobSpec, &Input, &dyn Control) -> Result<JobOutcome, AlgoError>;
 
 /// Runs jobs.
 pub struct Executor {
@@ -133,7 +129,7 @@ impl Executor {
         metrics: Arc<Metrics>,
         webhooks: Arc<Webhooks>,
     ) -> std::io::Result<Arc<Executor>> {
-        Executor::with_runner(store, limits, metrics, webhooks, algorithms::run)
+        Executor::with_runner(store, limits, metrics, webhooks, JobSpec::run)
     }
 
     /// As [`Executor::new`], running jobs with `runner`.
@@ -430,47 +426,30 @@ impl Executor {
         job: &JobRecord,
         control: &JobControl<'_>,
     ) -> Result<(Vec<String>, serde_json::Value), ExecError> {
+        let spec = JobSpec::parse(&job.kind, &job.params)
+            .map_err(|e| ExecError::Input(Problem::invalid("params", e.to_string())))?;
         let (mesh, warnings) = self.load_mesh(&job.mesh_id, "mesh_id")?;
         let reference = match &job.reference_mesh_id {
             Some(r) => Some(self.load_mesh(r, "reference_mesh_id")?.0),
             None => None,
         };
-        let input = algorithms::Input { mesh, reference };
+        let input = Input { mesh, reference };
         let start = Instant::now();
-        let mut outcome =
-            (self.runner)(&job.kind, &input, &job.params, control).map_err(ExecError::Algo)?;
-        patterns_of_output(&mut outcome, control).map_err(ExecError::Algo)?;
+        let outcome = (self.runner)(&spec, &input, control).map_err(ExecError::Algo)?;
         let seconds = start.elapsed().as_secs_f64();
+        let rendered = artifacts::render(spec.kind(), &input.mesh, &outcome, &warnings, seconds);
         let mut names = Vec::new();
-        let artifacts = io::artifacts::render(&input.mesh, &outcome, &warnings, seconds);
-        for a in &artifacts {
+        for a in &rendered.artifacts {
             self.store
                 .put_blob(&format!("jobs/{}/{}", job.id, a.name), &a.bytes)
                 .map_err(|e| ExecError::Input(e.into()))?;
             names.push(a.name.to_string());
         }
-        // glTF (JSON) as well, for `?format=gltf`.
-        let out = outcome.mesh.as_ref().unwrap_or(&input.mesh);
-        let theta = crate::geometry::angle_sums(out);
-        let varpi = crate::geometry::flattenability(out, &theta);
-        let reached = reached(&outcome.summary, &varpi);
-        let gltf = io::gltf::write_gltf(out, Some(&varpi));
-        self.store
-            .put_blob(&format!("jobs/{}/mesh.gltf", job.id), &gltf)
-            .map_err(|e| ExecError::Input(e.into()))?;
-        names.push("mesh.gltf".into());
-        for (k, level) in outcome.levels.iter().enumerate() {
-            let theta = crate::geometry::angle_sums(level);
-            let varpi = crate::geometry::flattenability(level, &theta);
-            let name = format!("level_{}.gltf", k + 1);
-            self.store
-                .put_blob(
-                    &format!("jobs/{}/{name}", job.id),
-                    &io::gltf::write_gltf(level, Some(&varpi)),
-                )
-                .map_err(|e| ExecError::Input(e.into()))?;
-            names.push(name);
-        }
+        let reached = serde_json::json!({
+            "converged": outcome.figures.converged(),
+            "max_flattenability": rendered.max_flattenability,
+            "stop_reason": outcome.figures.stop_reason(),
+        });
         Ok((names, reached))
     }
 
@@ -520,62 +499,9 @@ impl Executor {
     }
 }
 
-/// The job's top-level outcome: ϖ_max measured on the output mesh (not taken from the
-/// algorithm's own report), and, for iterative kinds, whether it converged and why it stopped
-/// (null for kinds that do not iterate).
-fn reached(
-    summary: &serde_json::Map<String, serde_json::Value>,
-    varpi: &[f64],
-) -> serde_json::Value {
-    let wmax = varpi
-        .iter()
-        .copied()
-        .filter(|w| w.is_finite())
-        .fold(0.0f64, f64::max);
-    serde_json::json!({
-        "converged": summary.get("converged").and_then(|v| v.as_bool()),
-        "max_flattenability": wmax,
-        "stop_reason": summary.get("stop_reason").and_then(|v| v.as_str()),
-    })
-}
-
 enum ExecError {
     Algo(AlgoError),
     Input(Problem),
-}
-
-/// `GET /v1/jobs/{id}/patterns` serves the patterns of the job's output mesh: a job that
-/// changes the mesh (fl-mesh, …) but does not flatten gets them from `flatten` with its
-/// defaults. When the output cannot be flattened the job still succeeds; the report says why
-/// under `patterns_unavailable`. Only cancellation propagates.
-fn patterns_of_output(
-    outcome: &mut algorithms::Outcome,
-    control: &dyn Control,
-) -> Result<(), AlgoError> {
-    let Some(mesh) = outcome.mesh.as_ref() else {
-        return Ok(());
-    };
-    if outcome.patterns.is_some() {
-        return Ok(());
-    }
-    match algorithms::flatten::run(mesh, &algorithms::flatten::Params::default(), control) {
-        Ok(flat) => {
-            outcome.patterns = flat.patterns;
-            if let Some(w) = flat.summary.get("job_warnings") {
-                if w.as_array().is_some_and(|a| !a.is_empty()) {
-                    outcome.summary.insert("pattern_warnings".into(), w.clone());
-                }
-            }
-            Ok(())
-        }
-        Err(AlgoError::Cancelled) => Err(AlgoError::Cancelled),
-        Err(e) => {
-            outcome
-                .summary
-                .insert("patterns_unavailable".into(), e.to_string().into());
-            Ok(())
-        }
-    }
 }
 
 #[cfg(test)]
@@ -583,30 +509,26 @@ mod tests {
     use super::*;
     use crate::service::store::{SqliteStore, Store};
 
+    /// Runs jobs as the service does, except that every `fl-mesh` job panics.
     fn runner(
-        kind: &str,
-        input: &algorithms::Input,
-        params: &serde_json::Map<String, serde_json::Value>,
+        spec: &JobSpec,
+        input: &Input,
         control: &dyn Control,
-    ) -> Result<algorithms::Outcome, AlgoError> {
-        if params.contains_key("boom") {
+    ) -> Result<JobOutcome, AlgoError> {
+        if spec.kind() == crate::jobs::Kind::FlMesh {
             panic!("index out of bounds: the len is 3 but the index is 7");
         }
-        algorithms::run(kind, input, params, control)
+        spec.run(input, control)
     }
 
     fn job(id: &str, mesh_id: &str, boom: bool) -> JobRecord {
-        let mut params = serde_json::Map::new();
-        if boom {
-            params.insert("boom".into(), serde_json::json!(true));
-        }
         JobRecord {
             seq: 0,
             id: id.into(),
-            kind: "report".into(),
+            kind: if boom { "fl-mesh" } else { "report" }.into(),
             mesh_id: mesh_id.into(),
             reference_mesh_id: None,
-            params,
+            params: serde_json::Map::new(),
             callback_url: None,
             status: Status::Queued,
             progress: None,

@@ -781,8 +781,81 @@ pub const BOUNDARY_LENGTH_TOLERANCE: f64 = 1e-9;
 /// when it does not overlap: about what woven fabric gives without showing it.
 pub const DISTORTION_WARNING_PCT: f64 = 1.0;
 
+/// What `flatten` reports besides the patterns.
+#[derive(Debug, Clone, Serialize)]
+pub struct Summary {
+    /// `lpfb` or `lscm`.
+    pub method: Method,
+    /// The unit the mesh was read in.
+    pub input_unit: String,
+    /// Why, when it was guessed (`input_unit = auto`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub input_unit_guessed: Option<String>,
+    /// Unit of the drawings.
+    pub unit: Unit,
+    /// How inner loops were treated.
+    pub cuts: cut::Cuts,
+    /// Per piece.
+    pub pieces: Vec<PieceSummary>,
+    /// Seams between pieces and real cuts.
+    pub seams: Vec<SeamSummary>,
+    /// Pieces skipped or not usable as they are, each with the reason.
+    pub job_warnings: Vec<String>,
+    /// Every piece's LPFB converged.
+    pub all_converged: bool,
+    /// Seconds per stage.
+    pub timings: Timings,
+}
+
+/// One piece in [`Summary`].
+#[derive(Debug, Clone, Serialize)]
+pub struct PieceSummary {
+    /// Piece name.
+    pub piece: String,
+    /// 2D area.
+    pub area: f64,
+    /// 2D perimeter.
+    pub perimeter: f64,
+    /// The piece's measures (as in patterns.json).
+    pub measures: serde_json::Map<String, serde_json::Value>,
+    /// What the solver did.
+    pub solver: PieceInfo,
+}
+
+/// One seam in [`Summary`].
+#[derive(Debug, Clone, Serialize)]
+pub struct SeamSummary {
+    /// The two pieces' names (the same twice for a real cut).
+    pub patches: [String; 2],
+    /// 3D length.
+    pub length_3d: f64,
+    /// Length on each side in 2D.
+    pub lengths: [f64; 2],
+}
+
+/// Seconds per stage of `flatten`.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Timings {
+    /// Components and topology.
+    pub topology_s: f64,
+    /// LPFB, summed over pieces.
+    pub lpfb_s: f64,
+    /// Interior solves, summed over pieces.
+    pub param_s: f64,
+    /// Measures, summed over pieces.
+    pub measures_s: f64,
+    /// Seams.
+    pub seams_s: f64,
+    /// Wall time.
+    pub total_s: f64,
+}
+
 /// Run `flatten` on a mesh.
-pub fn run(mesh: &Mesh, params: &Params, control: &dyn Control) -> Result<Outcome, AlgoError> {
+pub fn run(
+    mesh: &Mesh,
+    params: &Params,
+    control: &dyn Control,
+) -> Result<Outcome<Summary>, AlgoError> {
     params.check()?;
     let t0 = Instant::now();
     let mut job_warnings = Vec::new();
@@ -831,71 +904,55 @@ pub fn run(mesh: &Mesh, params: &Params, control: &dyn Control) -> Result<Outcom
     let mut seams = seams(mesh, &pieces);
     seams.extend(cut_seams(mesh, &pieces, &infos));
     let t_seams = t1.elapsed().as_secs_f64();
-    let mut summary = serde_json::Map::new();
-    summary.insert("method".into(), serde_json::json!(params.method));
-    summary.insert("input_unit".into(), serde_json::json!(input_unit));
-    if params.input_unit == InputUnit::Auto {
-        summary.insert(
-            "input_unit_guessed".into(),
-            serde_json::json!(format!(
-                "input_unit not given: `{}` assumed from the bounding-box diagonal {:.4} (the unit \
-                 that puts it in [0.3, 3) m); pass input_unit to override",
-                input_unit.name(),
-                diagonal
-            )),
-        );
-    }
-    summary.insert("unit".into(), serde_json::json!(params.unit));
-    summary.insert("cuts".into(), serde_json::json!(params.cuts));
-    let per_piece: Vec<serde_json::Value> = pieces
-        .iter()
-        .zip(&infos)
-        .map(|(p, i)| {
-            serde_json::json!({
-                "piece": p.patch,
-                "area": p.area,
-                "perimeter": p.perimeter,
-                "measures": p.measures,
-                "solver": i,
-            })
-        })
-        .collect();
-    summary.insert("pieces".into(), serde_json::Value::Array(per_piece));
-    summary.insert(
-        "seams".into(),
-        serde_json::to_value(
-            seams
-                .iter()
-                .map(|s| {
-                    serde_json::json!({"patches": s.patches, "length_3d": s.length_3d,
-                        "lengths": s.lengths})
-                })
-                .collect::<Vec<_>>(),
-        )
-        .unwrap_or_default(),
-    );
     job_warnings.extend(
         pieces
             .iter()
             .zip(&infos)
             .filter_map(|(p, i)| piece_warning(p, i, params)),
     );
-    summary.insert("job_warnings".into(), serde_json::json!(job_warnings));
-    summary.insert(
-        "all_converged".into(),
-        serde_json::json!(infos.iter().all(|i| i.converged)),
-    );
-    summary.insert(
-        "timings".into(),
-        serde_json::json!({
-            "topology_s": t_topo,
-            "lpfb_s": infos.iter().map(|i| i.seconds_lpfb).sum::<f64>(),
-            "param_s": infos.iter().map(|i| i.seconds_param).sum::<f64>(),
-            "measures_s": infos.iter().map(|i| i.seconds_measures).sum::<f64>(),
-            "seams_s": t_seams,
-            "total_s": t0.elapsed().as_secs_f64(),
+    let summary = Summary {
+        method: params.method,
+        input_unit: input_unit.name().to_string(),
+        input_unit_guessed: (params.input_unit == InputUnit::Auto).then(|| {
+            format!(
+                "input_unit not given: `{}` assumed from the bounding-box diagonal {:.4} (the unit \
+                 that puts it in [0.3, 3) m); pass input_unit to override",
+                input_unit.name(),
+                diagonal
+            )
         }),
-    );
+        unit: params.unit,
+        cuts: params.cuts,
+        pieces: pieces
+            .iter()
+            .zip(&infos)
+            .map(|(p, i)| PieceSummary {
+                piece: p.patch.clone(),
+                area: p.area,
+                perimeter: p.perimeter,
+                measures: p.measures.clone(),
+                solver: i.clone(),
+            })
+            .collect(),
+        seams: seams
+            .iter()
+            .map(|s| SeamSummary {
+                patches: s.patches.clone(),
+                length_3d: s.length_3d,
+                lengths: s.lengths,
+            })
+            .collect(),
+        job_warnings,
+        all_converged: infos.iter().all(|i| i.converged),
+        timings: Timings {
+            topology_s: t_topo,
+            lpfb_s: infos.iter().map(|i| i.seconds_lpfb).sum(),
+            param_s: infos.iter().map(|i| i.seconds_param).sum(),
+            measures_s: infos.iter().map(|i| i.seconds_measures).sum(),
+            seams_s: t_seams,
+            total_s: t0.elapsed().as_secs_f64(),
+        },
+    };
     let patterns = Patterns {
         pieces,
         seams,

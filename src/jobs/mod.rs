@@ -1,0 +1,274 @@
+//! The jobs domain: which job kinds exist, what each needs and runs, and what a finished job
+//! produces. It sits between the algorithms (pure functions on meshes) and the two front ends
+//! (the CLI's `flatmesh run` and the service), which both go through it, so that a kind is
+//! declared once: [`Kind`] lists the kinds, [`JobSpec`] holds a kind with its typed parameters,
+//! and every per-kind decision is one exhaustive `match` below (adding a kind without handling
+//! it anywhere does not compile). [`artifacts`] turns an outcome into the files a user
+//! downloads, the same for the CLI and the service.
+
+pub mod artifacts;
+
+use crate::algorithms::{
+    self, fl_mesh, flatten, parse_params, report_job, subdivide, AlgoError, Control,
+};
+use crate::mesh::Mesh;
+use serde::Serialize;
+
+/// A job kind.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Kind {
+    /// The flattenability report of the input.
+    Report,
+    /// Flat patterns (LPFB).
+    Flatten,
+    /// Make the mesh flattenable (FL-mesh optimisation).
+    FlMesh,
+    /// Variational subdivision of an FL mesh.
+    Subdivide,
+}
+
+/// Whether a kind takes a reference body (`reference_mesh_id`, `--reference`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Reference {
+    /// A reference is refused.
+    None,
+    /// A reference may be given.
+    Optional,
+    /// A reference must be given.
+    Required,
+}
+
+impl Kind {
+    /// Every kind, in the order the CLI and the API list them.
+    pub const ALL: [Kind; 4] = [Kind::Report, Kind::Flatten, Kind::FlMesh, Kind::Subdivide];
+
+    /// The kind's name in requests, on the command line and in the API.
+    pub fn name(self) -> &'static str {
+        match self {
+            Kind::Report => "report",
+            Kind::Flatten => "flatten",
+            Kind::FlMesh => "fl-mesh",
+            Kind::Subdivide => "subdivide",
+        }
+    }
+
+    /// The kind called `name`.
+    pub fn from_name(name: &str) -> Option<Kind> {
+        Kind::ALL.into_iter().find(|k| k.name() == name)
+    }
+
+    /// Every kind's name.
+    pub fn names() -> Vec<&'static str> {
+        Kind::ALL.iter().map(|k| k.name()).collect()
+    }
+
+    /// Whether it takes a reference body.
+    pub fn reference(self) -> Reference {
+        match self {
+            Kind::Report | Kind::Flatten | Kind::FlMesh | Kind::Subdivide => Reference::None,
+        }
+    }
+}
+
+/// Why a job cannot be accepted, naming the request field at fault.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SpecError {
+    /// The kind does not exist.
+    #[error("unknown job kind `{0}` (available: {kinds})", kinds = Kind::names().join(", "))]
+    UnknownKind(String),
+    /// A parameter is unknown or out of range.
+    #[error("{0}")]
+    Params(AlgoError),
+    /// The reference body was given to a kind that does not use one, or is missing.
+    #[error("{0}")]
+    Reference(String),
+}
+
+/// A job kind with its typed, checked parameters.
+#[derive(Debug, Clone)]
+pub enum JobSpec {
+    /// `report`.
+    Report(report_job::Params),
+    /// `flatten`.
+    Flatten(flatten::Params),
+    /// `fl-mesh`.
+    FlMesh(fl_mesh::Params),
+    /// `subdivide`.
+    Subdivide(subdivide::Params),
+}
+
+impl JobSpec {
+    /// Parse and range-check the parameters of `kind`.
+    pub fn parse(
+        kind: &str,
+        params: &serde_json::Map<String, serde_json::Value>,
+    ) -> Result<JobSpec, SpecError> {
+        let k = Kind::from_name(kind).ok_or_else(|| SpecError::UnknownKind(kind.into()))?;
+        Ok(match k {
+            Kind::Report => JobSpec::Report(parse_params(params).map_err(SpecError::Params)?),
+            Kind::Flatten => {
+                let p: flatten::Params = parse_params(params).map_err(SpecError::Params)?;
+                p.check().map_err(SpecError::Params)?;
+                JobSpec::Flatten(p)
+            }
+            Kind::FlMesh => {
+                let p: fl_mesh::Params = parse_params(params).map_err(SpecError::Params)?;
+                p.check().map_err(SpecError::Params)?;
+                JobSpec::FlMesh(p)
+            }
+            Kind::Subdivide => {
+                let p: subdivide::Params = parse_params(params).map_err(SpecError::Params)?;
+                p.check().map_err(SpecError::Params)?;
+                JobSpec::Subdivide(p)
+            }
+        })
+    }
+
+    /// Refuse a reference body given to a kind that does not use one, or missing for a kind
+    /// that needs one.
+    pub fn check_reference(&self, has_reference: bool) -> Result<(), SpecError> {
+        let kind = self.kind().name();
+        match (self.kind().reference(), has_reference) {
+            (Reference::None, true) => Err(SpecError::Reference(format!(
+                "`{kind}` does not use a reference body; leave it out"
+            ))),
+            (Reference::Required, false) => Err(SpecError::Reference(format!(
+                "`{kind}` needs a reference body"
+            ))),
+            _ => Ok(()),
+        }
+    }
+
+    /// Its kind.
+    pub fn kind(&self) -> Kind {
+        match self {
+            JobSpec::Report(_) => Kind::Report,
+            JobSpec::Flatten(_) => Kind::Flatten,
+            JobSpec::FlMesh(_) => Kind::FlMesh,
+            JobSpec::Subdivide(_) => Kind::Subdivide,
+        }
+    }
+
+    /// The parameters as JSON, every default filled in.
+    pub fn params(&self) -> serde_json::Value {
+        match self {
+            JobSpec::Report(p) => serde_json::to_value(p),
+            JobSpec::Flatten(p) => serde_json::to_value(p),
+            JobSpec::FlMesh(p) => serde_json::to_value(p),
+            JobSpec::Subdivide(p) => serde_json::to_value(p),
+        }
+        .unwrap_or_default()
+    }
+
+    /// Run it; a kind that changes the mesh without flattening it also gets the patterns of
+    /// its output ([`artifacts::derive_patterns`]).
+    pub fn run(&self, input: &Input, control: &dyn Control) -> Result<JobOutcome, AlgoError> {
+        let mut outcome = self.run_algorithm(input, control)?;
+        artifacts::derive_patterns(&mut outcome, control)?;
+        Ok(outcome)
+    }
+
+    fn run_algorithm(&self, input: &Input, control: &dyn Control) -> Result<JobOutcome, AlgoError> {
+        let mesh = &input.mesh;
+        Ok(match self {
+            JobSpec::Report(p) => report_job::run(mesh, p, control)?.into_job(Figures::Report),
+            JobSpec::Flatten(p) => flatten::run(mesh, p, control)?.into_job(Figures::Flatten),
+            JobSpec::FlMesh(p) => fl_mesh::run(mesh, p, control)?.into_job(Figures::FlMesh),
+            JobSpec::Subdivide(p) => subdivide::run(mesh, p, control)?.into_job(Figures::Subdivide),
+        })
+    }
+}
+
+/// Everything a job needs.
+#[derive(Debug, Clone)]
+pub struct Input {
+    /// The mesh to work on.
+    pub mesh: Mesh,
+    /// A reference body, for the kinds that take one ([`Kind::reference`]).
+    pub reference: Option<Mesh>,
+}
+
+/// An algorithm's own figures, typed per kind; serialised as the algorithm's struct.
+#[derive(Debug, Clone, Serialize)]
+#[serde(untagged)]
+pub enum Figures {
+    /// `report` has none.
+    Report(report_job::Summary),
+    /// `flatten`.
+    Flatten(flatten::Summary),
+    /// `fl-mesh`.
+    FlMesh(fl_mesh::Summary),
+    /// `subdivide`.
+    Subdivide(subdivide::Summary),
+}
+
+impl Figures {
+    /// Whether an iterative kind converged (None for kinds that do not iterate).
+    pub fn converged(&self) -> Option<bool> {
+        match self {
+            Figures::Report(_) | Figures::Flatten(_) => None,
+            Figures::FlMesh(s) => Some(s.report.converged),
+            Figures::Subdivide(s) => Some(s.converged),
+        }
+    }
+
+    /// Why an iterative kind stopped.
+    pub fn stop_reason(&self) -> Option<&str> {
+        match self {
+            Figures::Report(_) | Figures::Flatten(_) => None,
+            Figures::FlMesh(s) => Some(&s.report.stop_reason),
+            Figures::Subdivide(s) => s.stop_reason.as_deref(),
+        }
+    }
+
+    /// Interior vertices an optimiser left above its tolerance.
+    pub fn stuck_vertices(&self) -> &[u32] {
+        match self {
+            Figures::Report(_) | Figures::Flatten(_) => &[],
+            Figures::FlMesh(s) => &s.report.stuck_vertices,
+            Figures::Subdivide(s) => &s.stuck_vertices,
+        }
+    }
+
+    /// Warnings for the user about the result (pieces skipped or not usable).
+    pub fn warnings(&self) -> &[String] {
+        match self {
+            Figures::Flatten(s) => &s.job_warnings,
+            Figures::Report(_) | Figures::FlMesh(_) | Figures::Subdivide(_) => &[],
+        }
+    }
+}
+
+/// What a job produced.
+#[derive(Debug, Clone)]
+pub struct JobOutcome {
+    /// The output mesh, for kinds that change the mesh.
+    pub mesh: Option<Mesh>,
+    /// Flat patterns, for kinds that flatten.
+    pub patterns: Option<crate::pattern::Patterns>,
+    /// Every level's mesh (`subdivide`).
+    pub levels: Vec<Mesh>,
+    /// The algorithm's figures.
+    pub figures: Figures,
+    /// Warnings of the patterns derived from a mesh-changing job's output.
+    pub pattern_warnings: Vec<String>,
+    /// Why a mesh-changing job's output could not be flattened.
+    pub patterns_unavailable: Option<String>,
+}
+
+trait IntoJob<S> {
+    fn into_job(self, wrap: fn(S) -> Figures) -> JobOutcome;
+}
+
+impl<S> IntoJob<S> for algorithms::Outcome<S> {
+    fn into_job(self, wrap: fn(S) -> Figures) -> JobOutcome {
+        JobOutcome {
+            mesh: self.mesh,
+            patterns: self.patterns,
+            levels: self.levels,
+            figures: wrap(self.summary),
+            pattern_warnings: Vec::new(),
+            patterns_unavailable: None,
+        }
+    }
+}
