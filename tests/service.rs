@@ -1838,3 +1838,52 @@ async fn cli_and_service_write_the_same_files() {
         }
     }
 }
+
+/// A multipart submit retried with one Idempotency-Key (three times) makes one job and stores
+/// one mesh; a different mesh under the same key is refused and stores nothing.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn retried_multipart_submit_stores_one_mesh() {
+    let s = Server::start(&tmp("multipart-retry"), &[]);
+    let c = client();
+    let form = |name: &str| {
+        reqwest::multipart::Form::new()
+            .text("job", r#"{"kind": "report"}"#)
+            .part(
+                "mesh",
+                reqwest::multipart::Part::bytes(fixture(name))
+                    .file_name("a.obj")
+                    .mime_str("model/obj")
+                    .unwrap(),
+            )
+    };
+    let mut ids = Vec::new();
+    for attempt in 0..3 {
+        let r = c
+            .post(s.url("/v1/jobs"))
+            .header("idempotency-key", "retry-1")
+            .multipart(form("cylinder"))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 202);
+        assert_eq!(
+            r.headers().get("idempotent-replayed").is_some(),
+            attempt > 0,
+            "attempt {attempt}"
+        );
+        ids.push(json_of(r, "Job").await["id"].as_str().unwrap().to_string());
+    }
+    assert!(ids.iter().all(|i| i == &ids[0]), "{ids:?}");
+    let r = c
+        .post(s.url("/v1/jobs"))
+        .header("idempotency-key", "retry-1")
+        .multipart(form("cone"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(problem(r, 422).await["field"], "Idempotency-Key");
+    let meshes = std::fs::read_dir(s.dir.join("blobs/meshes"))
+        .unwrap()
+        .count();
+    assert_eq!(meshes, 1, "one mesh stored for four requests");
+}

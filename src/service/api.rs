@@ -445,6 +445,8 @@ pub async fn submit_job(
     let media = media_type(&headers).unwrap_or_default();
     let mut hasher = Sha256::new();
     let mut submit;
+    // multipart uploads, stored only once the request is known not to be a replay
+    let mut uploads: Vec<(&str, Bytes, io::Format)> = Vec::new();
     if media == "application/json" {
         let body = axum::body::to_bytes(request.into_body(), st.max_upload)
             .await
@@ -507,10 +509,9 @@ pub async fn submit_job(
         if let Some((rb, _)) = &reference {
             hasher.update(format!("reference={};", sha256_hex(rb)));
         }
-        // The uploads are validated like POST /v1/meshes and then referenced by id.
-        submit.mesh_id = Some(store_mesh(&st, mb, mf, "mesh").await?.id);
+        uploads.push(("mesh", mb, mf));
         if let Some((rb, rf)) = reference {
-            submit.reference_mesh_id = Some(store_mesh(&st, rb, rf, "reference").await?.id);
+            uploads.push(("reference", rb, rf));
         }
     } else {
         return Err(Problem::unsupported_media(format!(
@@ -524,6 +525,28 @@ pub async fn submit_job(
         submit.callback_url
     ));
     let request_hash = hex(&hasher.finalize());
+    let replay = match &key {
+        Some(k) if !uploads.is_empty() => {
+            let (store, k) = (st.store.clone(), k.clone());
+            blocking(move || Ok(store.find_idempotent(&k)?)).await?
+        }
+        _ => None,
+    };
+    // The uploads are validated like POST /v1/meshes and then referenced by id.
+    let mut stored_here = Vec::new();
+    if replay.is_none() {
+        for (field, bytes, format) in uploads {
+            let id = store_mesh(&st, bytes, format, field).await?.id;
+            match field {
+                "mesh" => submit.mesh_id = Some(id.clone()),
+                _ => submit.reference_mesh_id = Some(id.clone()),
+            }
+            stored_here.push(id);
+        }
+    }
+    if let Some(j) = replay {
+        return submitted(&st, j, &request_hash, true);
+    }
     let reserved = st.exec.reserve();
     let record = JobRecord {
         seq: 0,
@@ -569,26 +592,41 @@ pub async fn submit_job(
             return Err(p);
         }
     };
-    let (job, replayed) = match inserted {
-        None => return Err(queue_full(&st)),
+    match inserted {
+        None => Err(queue_full(&st)),
         Some(Inserted::New(j)) => {
             st.exec.enqueue(j.id.clone(), true);
             st.metrics.submitted();
-            (j, false)
+            submitted(&st, j, &request_hash, false)
         }
         Some(Inserted::Existing(j)) => {
             if reserved {
                 st.exec.release();
             }
-            if j.request_hash.as_deref() != Some(request_hash.as_str()) {
-                return Err(Problem::invalid(
-                    "Idempotency-Key",
-                    "this Idempotency-Key was used with a different request",
-                ));
-            }
-            (j, true)
+            // A concurrent retry with the same key won the race: the meshes stored for this
+            // request are not referenced by any job.
+            let store = st.store.clone();
+            let _ = blocking(move || {
+                for id in stored_here {
+                    store.delete_mesh(&id)?;
+                    store.delete_blobs(&format!("meshes/{id}"))?;
+                }
+                Ok(())
+            })
+            .await;
+            submitted(&st, j, &request_hash, true)
         }
-    };
+    }
+}
+
+/// The 202 for a new or replayed job; a replay whose request differs is refused.
+fn submitted(st: &AppState, job: JobRecord, request_hash: &str, replayed: bool) -> ApiResult {
+    if replayed && job.request_hash.as_deref() != Some(request_hash) {
+        return Err(Problem::invalid(
+            "Idempotency-Key",
+            "this Idempotency-Key was used with a different request",
+        ));
+    }
     let live = st
         .exec
         .live(&job.id)
