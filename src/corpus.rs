@@ -155,10 +155,11 @@ pub fn with_normal_noise(mesh: &Mesh, sigma: f64, seed: u64) -> Mesh {
 /// Where the shared meshes live, relative to the crate root.
 pub const SHARED_MESHES: &str = "../shared/meshes";
 
-/// `../shared/meshes` beside the crate, for tests: None, with a visible SKIPPED line on
-/// stderr, when it is absent (a user's fresh clone); a panic when it is absent although
-/// `CI=true`, since CI always has it.
-pub fn shared_root_for_tests() -> Option<PathBuf> {
+/// `../shared/meshes` beside the crate, for tests: None when it is absent (a user's fresh
+/// clone), after a SKIPPED line naming `what` written straight to the process's stderr (the
+/// test harness captures `println!`/`eprintln!` of passing tests, so a skip said that way was
+/// never seen); a panic when it is absent although `CI=true`, since CI always has it.
+pub fn shared_root_for_tests(what: &str) -> Option<PathBuf> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join(SHARED_MESHES);
     if dir.is_dir() {
         return Some(dir);
@@ -168,11 +169,18 @@ pub fn shared_root_for_tests() -> Option<PathBuf> {
         "{} is missing although CI=true: CI always has it",
         dir.display()
     );
-    eprintln!(
-        "SKIPPED: {} is absent; the real-mesh checks did not run",
+    use std::io::Write;
+    let _ = writeln!(
+        std::io::stderr(),
+        "SKIPPED ({what}): {} is absent, so these real-mesh checks did not run",
         dir.display()
     );
     None
+}
+
+/// One shared mesh's path, `rel` under `../shared/meshes` (see [`shared_root_for_tests`]).
+pub fn shared_mesh_for_tests(rel: &str) -> Option<PathBuf> {
+    shared_root_for_tests(rel).map(|root| root.join(rel))
 }
 
 /// The open-surface meshes listed in `root/MANIFEST.tsv` (column `surface` starting with

@@ -38,8 +38,7 @@ fn nearest_vertex_max(from: &Mesh, to: &Mesh) -> f64 {
 
 #[test]
 fn run_fl_mesh_writes_a_flattenable_mesh_and_its_report() {
-    if !Path::new("../shared").exists() {
-        println!("skipping: ../shared not present");
+    if flatmesh::corpus::shared_root_for_tests("cli fl-mesh on the t-shirt").is_none() {
         return;
     }
     let refined = check_run("tshirt", &[]);
@@ -51,8 +50,7 @@ fn run_fl_mesh_writes_a_flattenable_mesh_and_its_report() {
 /// solver one day converge here without refining, pick another setting that refines.)
 #[test]
 fn run_fl_mesh_with_refinement_appends_vertices() {
-    if !Path::new("../shared").exists() {
-        println!("skipping: ../shared not present");
+    if flatmesh::corpus::shared_root_for_tests("cli fl-mesh refinement").is_none() {
         return;
     }
     let refined = check_run("tshirt-refine", &["stall_iterations=8", "shape_penalty=0"]);

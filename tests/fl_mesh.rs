@@ -6,7 +6,6 @@ use flatmesh::algorithms::fl_mesh::{self, Params, Until};
 use flatmesh::algorithms::{AlgoError, Control, Progress, Silent};
 use flatmesh::geometry;
 use flatmesh::mesh::{Mesh, RawMesh, VertexKind};
-use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 fn load_fixture(name: &str) -> Mesh {
@@ -100,11 +99,7 @@ fn two_panel_tube_converges_with_seams_fixed() {
 }
 
 fn shared(rel: &str) -> Option<Mesh> {
-    let p = Path::new("../shared/meshes").join(rel);
-    if !Path::new("../shared").exists() {
-        println!("skipping: ../shared not present");
-        return None;
-    }
+    let p = flatmesh::corpus::shared_mesh_for_tests(rel)?;
     Some(flatmesh::io::load_path(&p).expect("loads").0)
 }
 

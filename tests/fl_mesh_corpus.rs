@@ -12,7 +12,7 @@ use std::path::PathBuf;
 
 /// ../shared/meshes, or None with a visible notice; under CI=true its absence is a failure.
 fn shared_root() -> Option<PathBuf> {
-    corpus::shared_root_for_tests()
+    corpus::shared_root_for_tests("fl-mesh on the real-mesh corpus")
 }
 
 /// Run and check what must hold for every input; returns (ϖ in, ϖ out, converged).

@@ -269,11 +269,7 @@ fn cone_strip_matches_its_unrolling() {
 }
 
 fn shared(rel: &str) -> Option<Mesh> {
-    let path = Path::new("../shared/meshes").join(rel);
-    if !path.exists() {
-        println!("skipping: ../shared not present");
-        return None;
-    }
+    let path = flatmesh::corpus::shared_mesh_for_tests(rel)?;
     Some(flatmesh::io::load_path(&path).expect("load").0)
 }
 
@@ -639,15 +635,12 @@ fn unflattenable_piece_is_named_in_a_warning() {
 #[test]
 fn hemisphere_has_no_flip_and_no_overlap_lpfb_beside_lscm() {
     let mut meshes = vec![("procedural cap".to_string(), sphere_cap(75.0))];
-    let fixture = Path::new("fixtures/hemisphere_cap.obj");
-    if fixture.exists() {
-        meshes.push((
-            "fixture hemisphere_cap".into(),
-            flatmesh::io::load_path(fixture).unwrap().0,
-        ));
-    } else {
-        println!("skipping fixture hemisphere_cap: not present yet");
-    }
+    meshes.push((
+        "fixture hemisphere_cap".into(),
+        flatmesh::io::load_path(Path::new("fixtures/hemisphere_cap.obj"))
+            .unwrap()
+            .0,
+    ));
     if let Some(m) = shared("paper/bff_hemisphere.obj") {
         meshes.push(("bff_hemisphere".into(), m));
     }
@@ -1198,10 +1191,6 @@ fn fixtures_flatten_exactly() {
         "cube_cuts",
     ] {
         let path = dir.join(format!("{name}.obj"));
-        if !path.exists() {
-            println!("skipping fixture {name}: not present yet");
-            continue;
-        }
         seen += 1;
         let mesh = flatmesh::io::load_path(&path).expect("fixture loads").0;
         let out = flatten::run(&mesh, &Params::default(), &Silent::default()).expect(name);

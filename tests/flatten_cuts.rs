@@ -567,7 +567,9 @@ fn arap_interior_is_exact_when_it_can_be_and_lowers_area_distortion() {
 /// no overlap and every triangle edge within 0.01 % of its 3D length.
 #[test]
 fn garments_made_flattenable_flatten_without_overlap() {
-    let Some(root) = flatmesh::corpus::shared_root_for_tests() else {
+    let Some(root) =
+        flatmesh::corpus::shared_root_for_tests("garments through fl-mesh and flatten")
+    else {
         return;
     };
     for rel in [

@@ -8,7 +8,6 @@ use flatmesh::geometry;
 use flatmesh::io::{self, gltf, Format, ReadError};
 use flatmesh::mesh::{Mesh, RawMesh};
 use serde_json::{json, Value};
-use std::path::Path;
 
 fn grid(nx: usize, ny: usize, z: impl Fn(f64, f64) -> f64) -> RawMesh {
     let mut positions = Vec::new();
@@ -843,13 +842,10 @@ fn report_cli_writes_a_glb_carrying_the_reported_flattenability() {
 
 #[test]
 fn every_shared_mesh_round_trips_through_glb() {
-    let root = Path::new("../shared/meshes");
-    if !root.is_dir() {
-        eprintln!(
-            "skipping: ../shared not present (the shared meshes live beside the clone in CI)"
-        );
+    let Some(root) = flatmesh::corpus::shared_root_for_tests("glb round trip of every shared mesh")
+    else {
         return;
-    }
+    };
     let manifest = std::fs::read_to_string(root.join("MANIFEST.tsv")).unwrap();
     let mut checked = 0;
     for line in manifest.lines().skip(1) {

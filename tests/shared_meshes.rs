@@ -9,14 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 fn shared_meshes() -> Option<Vec<PathBuf>> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/meshes");
-    if !dir.is_dir() {
-        eprintln!(
-            "SKIPPED: {} is absent (it sits beside the clone in CI); these tests need it",
-            dir.display()
-        );
-        return None;
-    }
+    let dir = flatmesh::corpus::shared_root_for_tests("every shared mesh against a recount")?;
     let mut out = Vec::new();
     for sub in std::fs::read_dir(&dir).unwrap() {
         let sub = sub.unwrap().path();
