@@ -146,6 +146,27 @@ async fn problem(res: reqwest::Response, status: u16) -> Value {
     v
 }
 
+/// A multipart part holding fixture `name` as an OBJ file called `file`.
+fn obj_part(name: &str, file: &str) -> reqwest::multipart::Part {
+    reqwest::multipart::Part::bytes(fixture(name))
+        .file_name(file.to_string())
+        .mime_str("model/obj")
+        .unwrap()
+}
+
+/// `POST /v1/jobs` with a multipart body.
+async fn post_jobs_form(
+    c: &reqwest::Client,
+    s: &Server,
+    form: reqwest::multipart::Form,
+) -> reqwest::Response {
+    c.post(s.url("/v1/jobs"))
+        .multipart(form)
+        .send()
+        .await
+        .unwrap()
+}
+
 fn client() -> reqwest::Client {
     reqwest::Client::builder()
         .timeout(Duration::from_secs(60))
@@ -460,13 +481,7 @@ async fn meshes_upload_report_delete() {
         .unwrap();
     assert_eq!(r.status(), 201);
     assert_eq!(json_of(r, "Mesh").await["vertices"], m["vertices"]);
-    let form = reqwest::multipart::Form::new().part(
-        "mesh",
-        reqwest::multipart::Part::bytes(fixture("cone"))
-            .file_name("cone.obj")
-            .mime_str("model/obj")
-            .unwrap(),
-    );
+    let form = reqwest::multipart::Form::new().part("mesh", obj_part("cone", "cone.obj"));
     let r = c
         .post(s.url("/v1/meshes"))
         .multipart(form)
@@ -900,19 +915,8 @@ async fn every_kind_end_to_end() {
                 .mime_str("application/json")
                 .unwrap(),
         )
-        .part(
-            "mesh",
-            reqwest::multipart::Part::bytes(fixture("saddle"))
-                .file_name("saddle.obj")
-                .mime_str("model/obj")
-                .unwrap(),
-        );
-    let r = c
-        .post(s.url("/v1/jobs"))
-        .multipart(form)
-        .send()
-        .await
-        .unwrap();
+        .part("mesh", obj_part("saddle", "saddle.obj"));
+    let r = post_jobs_form(&c, &s, form).await;
     assert_eq!(r.status(), 202);
     let j = json_of(r, "Job").await;
     let done = wait_for(&c, &s, j["id"].as_str().unwrap(), &["succeeded", "failed"]).await;
@@ -1713,26 +1717,9 @@ async fn reference_refused_by_kinds_without_one() {
     }
     let form = reqwest::multipart::Form::new()
         .text("job", r#"{"kind": "report"}"#)
-        .part(
-            "mesh",
-            reqwest::multipart::Part::bytes(fixture("cylinder"))
-                .file_name("a.obj")
-                .mime_str("model/obj")
-                .unwrap(),
-        )
-        .part(
-            "reference",
-            reqwest::multipart::Part::bytes(fixture("cylinder"))
-                .file_name("b.obj")
-                .mime_str("model/obj")
-                .unwrap(),
-        );
-    let r = c
-        .post(s.url("/v1/jobs"))
-        .multipart(form)
-        .send()
-        .await
-        .unwrap();
+        .part("mesh", obj_part("cylinder", "a.obj"))
+        .part("reference", obj_part("cylinder", "b.obj"));
+    let r = post_jobs_form(&c, &s, form).await;
     let p = problem(r, 422).await;
     assert_eq!(p["field"], "reference", "{p}");
     let meshes = std::fs::read_dir(s.dir.join("blobs/meshes"))
@@ -1848,13 +1835,7 @@ async fn retried_multipart_submit_stores_one_mesh() {
     let form = |name: &str| {
         reqwest::multipart::Form::new()
             .text("job", r#"{"kind": "report"}"#)
-            .part(
-                "mesh",
-                reqwest::multipart::Part::bytes(fixture(name))
-                    .file_name("a.obj")
-                    .mime_str("model/obj")
-                    .unwrap(),
-            )
+            .part("mesh", obj_part(name, "a.obj"))
     };
     let mut ids = Vec::new();
     for attempt in 0..3 {
