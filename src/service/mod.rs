@@ -12,6 +12,7 @@ pub mod jobs;
 pub mod metrics;
 pub mod problem;
 pub mod store;
+pub mod store_contract;
 pub mod webhook;
 
 use axum::extract::{DefaultBodyLimit, Request};

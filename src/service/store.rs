@@ -195,6 +195,67 @@ pub trait Store: Send + Sync {
     fn maintain(&self) -> Result<(), StoreError> {
         Ok(())
     }
+
+    // Coordination: every process serving one store runs jobs through these, so that a job
+    // runs once whichever process took it, a cancel reaches the process running it, and a
+    // job whose process died runs again. Each is one atomic step of the backend.
+
+    /// Take the oldest queued job for `worker`, leased until `now + lease_ms`: it becomes
+    /// running, its attempts grow by one, its progress and outcome are cleared.
+    fn claim(&self, worker: &str, now: i64, lease_ms: i64)
+        -> Result<Option<JobRecord>, StoreError>;
+    /// Extend `worker`'s lease on job `id` (and record `progress` when given); says whether a
+    /// cancel was requested, or that the lease is lost (expired and taken, or the job ended
+    /// or was deleted), in which case the worker must stop and not write its result.
+    fn heartbeat(
+        &self,
+        worker: &str,
+        id: &str,
+        now: i64,
+        lease_ms: i64,
+        progress: Option<&serde_json::Value>,
+    ) -> Result<Lease, StoreError>;
+    /// Record the end of a job `worker` holds (status, error, artifacts, outcome, times from
+    /// `j`); false, and nothing written, when it no longer holds it.
+    fn finish(&self, worker: &str, j: &JobRecord) -> Result<bool, StoreError>;
+    /// Cancel job `id`: a queued job ends cancelled at once (results kept until
+    /// `expires_at`), a running one is flagged for its worker's next heartbeat.
+    fn request_cancel(
+        &self,
+        id: &str,
+        now: i64,
+        expires_at: i64,
+    ) -> Result<CancelOutcome, StoreError>;
+    /// Running jobs whose lease ran out before `now`: queued again (or cancelled, when a
+    /// cancel was requested), and returned.
+    fn requeue_expired(&self, now: i64, expires_at: i64) -> Result<Vec<JobRecord>, StoreError>;
+    /// How many jobs are in state `s`.
+    fn count_with_status(&self, s: Status) -> Result<usize, StoreError>;
+}
+
+/// What a heartbeat learns.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Lease {
+    /// The worker still holds the job.
+    Held {
+        /// Someone asked to cancel it.
+        cancel_requested: bool,
+    },
+    /// The worker no longer holds it.
+    Lost,
+}
+
+/// What a cancel request did.
+#[derive(Debug, Clone, PartialEq)]
+pub enum CancelOutcome {
+    /// No such job.
+    NotFound,
+    /// It was queued and is now cancelled.
+    Cancelled(JobRecord),
+    /// It is running; its worker will stop at its next heartbeat.
+    Requested(JobRecord),
+    /// It had already ended.
+    Ended(JobRecord),
 }
 
 /// SQLite index (`flatmesh.sqlite3`, WAL) plus blob files under the data directory.
@@ -300,13 +361,25 @@ fn job_from_row(r: &rusqlite::Row<'_>) -> rusqlite::Result<JobRecord> {
     })
 }
 
-/// Stores made before jobs had an outcome get the column (empty for their jobs).
-fn add_outcome_column(conn: &Connection) -> rusqlite::Result<()> {
-    let has: bool = conn
-        .prepare("SELECT 1 FROM pragma_table_info('jobs') WHERE name = 'outcome'")?
-        .exists([])?;
-    if !has {
-        conn.execute_batch("ALTER TABLE jobs ADD COLUMN outcome TEXT")?;
+/// Stores made by older versions get the columns added since (empty for their jobs): the
+/// outcome, and the lease of the coordination contract (a running job without a lease counts
+/// as expired, so it is queued again).
+fn add_columns(conn: &Connection) -> rusqlite::Result<()> {
+    for (name, decl) in [
+        ("outcome", "outcome TEXT"),
+        ("worker", "worker TEXT"),
+        ("lease_until", "lease_until INTEGER"),
+        (
+            "cancel_requested",
+            "cancel_requested INTEGER NOT NULL DEFAULT 0",
+        ),
+    ] {
+        let has: bool = conn
+            .prepare("SELECT 1 FROM pragma_table_info('jobs') WHERE name = ?1")?
+            .exists([name])?;
+        if !has {
+            conn.execute_batch(&format!("ALTER TABLE jobs ADD COLUMN {decl}"))?;
+        }
     }
     Ok(())
 }
@@ -323,7 +396,7 @@ impl SqliteStore {
         conn.pragma_update(None, "synchronous", "NORMAL")?;
         conn.busy_timeout(std::time::Duration::from_secs(5))?;
         conn.execute_batch(SCHEMA)?;
-        add_outcome_column(&conn)?;
+        add_columns(&conn)?;
         // No automatic checkpoint inside a commit (it fsyncs, ~10-40 ms on a busy disk);
         // `maintain` checkpoints from its own connection instead.
         conn.pragma_update(None, "wal_autocheckpoint", 0)?;
@@ -623,5 +696,133 @@ impl Store for SqliteStore {
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
             Err(e) => Err(StoreError::Io(prefix.to_string(), e)),
         }
+    }
+
+    // Each of these is one statement (or one IMMEDIATE transaction), so it is atomic across
+    // every process that has the database open.
+
+    fn claim(
+        &self,
+        worker: &str,
+        now: i64,
+        lease_ms: i64,
+    ) -> Result<Option<JobRecord>, StoreError> {
+        let c = self.conn();
+        let mut st = c.prepare_cached(&format!(
+            "UPDATE jobs SET status='running', worker=?1, lease_until=?2 + ?3, started_at=?2, \
+             attempts=attempts+1, progress=NULL, outcome=NULL, cancel_requested=0 \
+             WHERE seq = (SELECT seq FROM jobs WHERE status='queued' ORDER BY seq LIMIT 1) \
+             RETURNING {JOB_COLS}"
+        ))?;
+        Ok(st
+            .query_row(params![worker, now, lease_ms], job_from_row)
+            .optional()?)
+    }
+
+    fn heartbeat(
+        &self,
+        worker: &str,
+        id: &str,
+        now: i64,
+        lease_ms: i64,
+        progress: Option<&serde_json::Value>,
+    ) -> Result<Lease, StoreError> {
+        let c = self.conn();
+        let mut st = c.prepare_cached(
+            "UPDATE jobs SET lease_until=?3 + ?4, progress=COALESCE(?5, progress) \
+             WHERE id=?1 AND worker=?2 AND status='running' RETURNING cancel_requested",
+        )?;
+        let flag: Option<i64> = st
+            .query_row(
+                params![id, worker, now, lease_ms, progress.map(|p| p.to_string())],
+                |r| r.get(0),
+            )
+            .optional()?;
+        Ok(match flag {
+            Some(f) => Lease::Held {
+                cancel_requested: f != 0,
+            },
+            None => Lease::Lost,
+        })
+    }
+
+    fn finish(&self, worker: &str, j: &JobRecord) -> Result<bool, StoreError> {
+        let n = self.conn().execute(
+            "UPDATE jobs SET status=?3, progress=?4, error=?5, finished_at=?6, expires_at=?7, \
+             artifacts=?8, outcome=?9, worker=NULL, lease_until=NULL \
+             WHERE id=?1 AND worker=?2 AND status='running'",
+            params![
+                j.id,
+                worker,
+                j.status.as_str(),
+                j.progress.as_ref().map(|p| p.to_string()),
+                j.error
+                    .as_ref()
+                    .map(serde_json::to_string)
+                    .transpose()
+                    .map_err(json_err)?,
+                j.finished_at,
+                j.expires_at,
+                serde_json::to_string(&j.artifacts).map_err(json_err)?,
+                j.outcome.as_ref().map(|o| o.to_string()),
+            ],
+        )?;
+        Ok(n == 1)
+    }
+
+    fn request_cancel(
+        &self,
+        id: &str,
+        now: i64,
+        expires_at: i64,
+    ) -> Result<CancelOutcome, StoreError> {
+        let mut c = self.conn();
+        let tx = c.transaction_with_behavior(rusqlite::TransactionBehavior::Immediate)?;
+        let Some(mut j) = job_by_id(&tx, id)? else {
+            return Ok(CancelOutcome::NotFound);
+        };
+        let out = match j.status {
+            Status::Queued => {
+                tx.execute(
+                    "UPDATE jobs SET status='cancelled', finished_at=?2, expires_at=?3 WHERE id=?1",
+                    params![id, now, expires_at],
+                )?;
+                j.status = Status::Cancelled;
+                j.finished_at = Some(now);
+                j.expires_at = Some(expires_at);
+                CancelOutcome::Cancelled(j)
+            }
+            Status::Running => {
+                tx.execute("UPDATE jobs SET cancel_requested=1 WHERE id=?1", [id])?;
+                CancelOutcome::Requested(j)
+            }
+            _ => CancelOutcome::Ended(j),
+        };
+        tx.commit()?;
+        Ok(out)
+    }
+
+    fn requeue_expired(&self, now: i64, expires_at: i64) -> Result<Vec<JobRecord>, StoreError> {
+        let c = self.conn();
+        let mut st = c.prepare_cached(&format!(
+            "UPDATE jobs SET \
+               status = CASE WHEN cancel_requested = 1 THEN 'cancelled' ELSE 'queued' END, \
+               finished_at = CASE WHEN cancel_requested = 1 THEN ?1 ELSE NULL END, \
+               expires_at = CASE WHEN cancel_requested = 1 THEN ?2 ELSE NULL END, \
+               worker=NULL, lease_until=NULL, progress=NULL \
+             WHERE status='running' AND (lease_until IS NULL OR lease_until < ?1) \
+             RETURNING {JOB_COLS}"
+        ))?;
+        let rows = st.query_map(params![now, expires_at], job_from_row)?;
+        Ok(rows.collect::<Result<Vec<_>, _>>()?)
+    }
+
+    fn count_with_status(&self, s: Status) -> Result<usize, StoreError> {
+        let n: i64 = self.reader().query_row(
+            "SELECT COUNT(*) FROM jobs WHERE status = ?1",
+            [s.as_str()],
+            |r| r.get(0),
+        )?;
+        Ok(n as usize)
     }
 }
