@@ -52,6 +52,9 @@ impl Server {
     fn url(&self, path: &str) -> String {
         format!("{}{}", self.base, path)
     }
+    fn pid(&self) -> u32 {
+        self.child.id()
+    }
     /// SIGKILL: the process dies without any chance to tidy up.
     fn kill(mut self) -> PathBuf {
         let _ = self.child.kill();
@@ -1350,12 +1353,12 @@ async fn cancel_full_queue_time_limit() {
 }
 
 /// Kill -9 the server with a finished, a running and a queued job; restart on the same data
-/// directory: the finished result is intact, the running job is re-queued (attempt 2), the
-/// queued job runs.
+/// directory: the finished result is intact, the running job is queued again once its lease
+/// (1 s here) runs out and runs as attempt 2, the queued job runs.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn restart_loses_nothing() {
     let dir = tmp("restart");
-    let s = Server::start(&dir, &["--workers", "1"]);
+    let s = Server::start(&dir, &["--workers", "1", "--lease", "1s"]);
     let c = client();
     let cyl = upload(&c, &s, fixture("cylinder")).await;
     let done = submit(&c, &s, json!({"kind": "flatten", "mesh_id": cyl["id"]})).await;
@@ -1384,7 +1387,7 @@ async fn restart_loses_nothing() {
     assert_eq!(job(&c, &s, &q_id).await["status"], "queued");
     let dir = s.kill();
 
-    let s = Server::start(&dir, &["--workers", "1"]);
+    let s = Server::start(&dir, &["--workers", "1", "--lease", "1s"]);
     let j = job(&c, &s, &done_id).await;
     assert_eq!(j["status"], "succeeded");
     let after = c
@@ -1404,7 +1407,18 @@ async fn restart_loses_nothing() {
         "Mesh",
     )
     .await;
-    let r = wait_for(&c, &s, &run_id, &["running"]).await;
+    let start = Instant::now();
+    let r = loop {
+        let r = job(&c, &s, &run_id).await;
+        if r["status"] == "running" && r["attempts"] == 2 {
+            break r;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "not re-run after the crash: {r}"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    };
     assert_eq!(r["attempts"], 2, "re-queued after the crash: {r}");
     c.post(s.url(&format!("/v1/jobs/{run_id}/cancel")))
         .send()
@@ -1420,7 +1434,7 @@ async fn restart_loses_nothing() {
     drop(s);
 
     // A job interrupted as often as allowed fails instead of looping.
-    let s = Server::start(&dir, &["--workers", "1"]);
+    let s = Server::start(&dir, &["--workers", "1", "--lease", "1s"]);
     let again = submit(
         &c,
         &s,
@@ -1430,8 +1444,11 @@ async fn restart_loses_nothing() {
     let a_id = again["id"].as_str().unwrap().to_string();
     wait_for(&c, &s, &a_id, &["running"]).await;
     let dir = s.kill();
-    let s = Server::start(&dir, &["--workers", "1", "--max-attempts", "1"]);
-    let f = job(&c, &s, &a_id).await;
+    let s = Server::start(
+        &dir,
+        &["--workers", "1", "--max-attempts", "1", "--lease", "1s"],
+    );
+    let f = wait_for(&c, &s, &a_id, &["failed", "succeeded", "cancelled"]).await;
     assert_eq!(f["status"], "failed", "{f}");
     assert_eq!(f["error"]["type"], "/problems/interrupted");
 }
@@ -1867,4 +1884,136 @@ async fn retried_multipart_submit_stores_one_mesh() {
         .unwrap()
         .count();
     assert_eq!(meshes, 1, "one mesh stored for four requests");
+}
+
+/// The worker holding a running job, read from the store (`host-pid-…/k`).
+fn holder(dir: &Path, id: &str) -> Option<String> {
+    let c = rusqlite::Connection::open(dir.join("flatmesh.sqlite3")).unwrap();
+    c.busy_timeout(Duration::from_secs(5)).unwrap();
+    c.query_row("SELECT worker FROM jobs WHERE id = ?1", [id], |r| r.get(0))
+        .unwrap()
+}
+
+/// Wait until job `id` runs, and return the pid of the process holding it.
+async fn running_on(c: &reqwest::Client, s: &Server, id: &str) -> u32 {
+    wait_for(c, s, id, &["running"]).await;
+    let w = holder(&s.dir, id).expect("a running job has a holder");
+    w.split('-').nth_back(1).unwrap().parse().unwrap()
+}
+
+/// Two `flatmesh serve` processes on one data directory share one queue: a cancel sent to
+/// either stops a job running on the other, progress shows through both, and of 30 jobs
+/// submitted through both, with one process killed (SIGKILL) mid-run and restarted, every
+/// job ends exactly once (one "job ended" line in the two processes' logs, a terminal status
+/// seen alike through both).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn two_processes_share_one_store() {
+    let dir = tmp("two-processes");
+    let args = ["--workers", "1", "--lease", "1s", "--job-time-limit", "4s"];
+    let a = Server::start(&dir, &args);
+    let c = client();
+    let cyl = upload(&c, &a, fixture("cylinder")).await;
+    let saddle = upload(&c, &a, saddle_obj(250)).await;
+    let slow: Value = serde_json::from_str(SLOW).unwrap();
+    let slow_job = json!({"kind": "flatten", "mesh_id": saddle["id"], "params": slow});
+    // a job that runs on A (B does not exist yet) is cancelled through B
+    let first = submit(&c, &a, slow_job.clone()).await;
+    let first = first["id"].as_str().unwrap().to_string();
+    assert_eq!(running_on(&c, &a, &first).await, a.pid());
+    let b = Server::start(&dir, &args);
+    let start = Instant::now();
+    loop {
+        let (pa, pb) = (job(&c, &a, &first).await, job(&c, &b, &first).await);
+        if !pa["progress"].is_null() && !pb["progress"].is_null() {
+            break;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(3),
+            "no progress via B: {pb}"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let r = c
+        .post(b.url(&format!("/v1/jobs/{first}/cancel")))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202);
+    let end = wait_for(&c, &a, &first, &["cancelled", "failed", "succeeded"]).await;
+    assert_eq!(end["status"], "cancelled", "{end}");
+    // and the other way round: whichever process runs the next one, cancel through the other
+    let second = submit(&c, &b, slow_job.clone()).await;
+    let second = second["id"].as_str().unwrap().to_string();
+    let other = if running_on(&c, &b, &second).await == a.pid() {
+        &b
+    } else {
+        &a
+    };
+    c.post(other.url(&format!("/v1/jobs/{second}/cancel")))
+        .send()
+        .await
+        .unwrap();
+    let end = wait_for(&c, other, &second, &["cancelled", "failed", "succeeded"]).await;
+    assert_eq!(end["status"], "cancelled", "{end}");
+
+    // 30 jobs through both; four run until the time limit, so that A dies holding one
+    let mut ids = Vec::new();
+    for k in 0..30 {
+        let via = if k % 2 == 0 { &a } else { &b };
+        let body = if k % 8 == 3 {
+            slow_job.clone()
+        } else if k % 2 == 0 {
+            json!({"kind": "report", "mesh_id": cyl["id"]})
+        } else {
+            json!({"kind": "flatten", "mesh_id": cyl["id"]})
+        };
+        ids.push(
+            submit(&c, via, body).await["id"]
+                .as_str()
+                .unwrap()
+                .to_string(),
+        );
+    }
+    let start = Instant::now();
+    let killed = loop {
+        let on_a = ids
+            .iter()
+            .find(|id| holder(&dir, id).is_some_and(|w| w.contains(&format!("-{}-", a.pid()))));
+        if let Some(id) = on_a {
+            break id.clone();
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "A never ran a job"
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    };
+    let a_dir = a.kill();
+    let a = Server::start(&a_dir, &args);
+    for id in &ids {
+        let via_a = wait_for(&c, &a, id, &["succeeded", "failed", "cancelled"]).await;
+        let via_b = job(&c, &b, id).await;
+        assert_eq!(via_a["status"], via_b["status"], "{id}");
+        assert_eq!(via_a["attempts"], via_b["attempts"], "{id}");
+        let want = if via_a["params"]["tolerance"].is_null() {
+            "succeeded"
+        } else {
+            "failed"
+        };
+        assert_eq!(via_a["status"], want, "{via_a}");
+    }
+    let killed_job = job(&c, &b, &killed).await;
+    assert!(
+        killed_job["attempts"].as_u64().unwrap() >= 2,
+        "{killed_job}"
+    );
+    let log = std::fs::read_to_string(dir.join("server.log")).unwrap();
+    for id in &ids {
+        let ended = log
+            .lines()
+            .filter(|l| l.contains("job ended") && l.contains(id.as_str()))
+            .count();
+        assert_eq!(ended, 1, "{id} ended {ended} times");
+    }
+    drop((a, b));
 }

@@ -4,7 +4,7 @@
 
 use super::metrics::Metrics;
 use super::problem::Problem;
-use super::store::{JobRecord, Status, Store, StoreError};
+use super::store::{CancelOutcome, JobRecord, Lease, Status, Store, StoreError};
 use super::webhook::Webhooks;
 use crate::algorithms::{AlgoError, Control, Progress};
 use crate::io;
@@ -13,7 +13,7 @@ use axum::http::StatusCode;
 use std::collections::HashMap;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 
 /// Milliseconds since the Unix epoch.
@@ -39,37 +39,54 @@ pub struct Limits {
     pub max_attempts: u32,
     /// Nice value of the worker threads (Linux), so that HTTP threads get the CPU first.
     pub nice: i32,
+    /// How long a claim on a running job lasts without a heartbeat.
+    pub lease: Duration,
 }
 
-/// In-memory state of a queued or running job.
+/// In-memory state of a job running in this process.
 #[derive(Debug, Default)]
 pub struct Live {
-    /// Set by `POST /cancel`.
+    /// Set by a cancel (here, or seen in a heartbeat), a lost lease or the time limit.
     pub cancel: AtomicBool,
-    /// Latest progress (JSON object), read by status polls.
+    /// Latest progress (JSON object), read by status polls here and written to the store by
+    /// the next heartbeat.
     pub progress: Mutex<Option<serde_json::Value>>,
+    /// Progress changed since the last heartbeat.
+    progress_dirty: AtomicBool,
+    /// The claim was lost (lease expired and taken, or the job was deleted): the result is
+    /// dropped.
+    lost: AtomicBool,
+    /// The worker (claim-loop thread) holding the job.
+    worker: String,
 }
 
 /// The function that runs a job ([`JobSpec::run`]; tests substitute their own).
 pub type Runner = fn(&JobSpec, &Input, &dyn Control) -> Result<JobOutcome, AlgoError>;
 
-/// Runs jobs.
+/// Runs jobs: worker threads claim queued jobs from the store (so that every process on one
+/// store shares one queue and a job runs once), run them on a rayon pool, renew their leases
+/// from a heartbeat thread (which also carries progress to the store and cancels requested
+/// through any process back to the worker), and record the end only while they still hold the
+/// job. Jobs whose process died are queued again when their lease runs out.
 pub struct Executor {
     pool: rayon::ThreadPool,
     runner: Runner,
     store: Arc<dyn Store>,
+    /// This process's worker id prefix (`host-pid-random`).
+    worker: String,
     live: Mutex<HashMap<String, Arc<Live>>>,
-    /// Serialises status transitions between handlers (cancel) and workers.
-    transition: Mutex<()>,
-    queued: AtomicUsize,
+    /// Wakes idle claim loops: a generation counter and its condition variable.
+    wake: (Mutex<u64>, Condvar),
     running: AtomicUsize,
-    /// Limits in force.
+    /// Executor limits.
     pub limits: Limits,
     metrics: Arc<Metrics>,
     webhooks: Arc<Webhooks>,
 }
 
-/// A [`Control`] bound to one job: cancelled by the client or by the time limit.
+/// How often an idle claim loop looks for work queued by another process.
+const POLL: Duration = Duration::from_millis(200);
+
 struct JobControl<'a> {
     live: &'a Live,
     deadline: Instant,
@@ -86,6 +103,7 @@ impl Control for JobControl<'_> {
             "updated_at": super::api::rfc3339(now_ms()),
         });
         *self.live.progress.lock().unwrap_or_else(|e| e.into_inner()) = Some(v);
+        self.live.progress_dirty.store(true, Ordering::Relaxed);
     }
     fn cancelled(&self) -> bool {
         if self.live.cancel.load(Ordering::Relaxed) {
@@ -122,7 +140,7 @@ fn panic_message(p: &(dyn std::any::Any + Send)) -> String {
 }
 
 impl Executor {
-    /// A pool of `limits.workers` threads.
+    /// An executor running jobs with [`JobSpec::run`]; its threads start at once.
     pub fn new(
         store: Arc<dyn Store>,
         limits: Limits,
@@ -141,56 +159,68 @@ impl Executor {
         runner: Runner,
     ) -> std::io::Result<Arc<Executor>> {
         let nice = limits.nice;
+        let workers = limits.workers.max(1);
         let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(limits.workers.max(1))
+            .num_threads(workers)
             .thread_name(|i| format!("flatmesh-worker-{i}"))
             // Jobs yield the CPU to the HTTP threads, so that status polls stay fast while
             // every worker is busy (Linux: setpriority on a thread id sets that thread only).
             .start_handler(move |_| lower_priority(nice))
             .build()
             .map_err(std::io::Error::other)?;
-        Ok(Arc::new(Executor {
+        let host = std::fs::read_to_string("/etc/hostname").unwrap_or_default();
+        let worker = format!(
+            "{}-{}-{}",
+            host.trim(),
+            std::process::id(),
+            &uuid::Uuid::new_v4().simple().to_string()[..8]
+        );
+        let exec = Arc::new(Executor {
             pool,
             runner,
             store,
+            worker,
             live: Mutex::new(HashMap::new()),
-            transition: Mutex::new(()),
-            queued: AtomicUsize::new(0),
+            wake: (Mutex::new(0), Condvar::new()),
             running: AtomicUsize::new(0),
             limits,
             metrics,
             webhooks,
-        }))
+        });
+        for k in 0..workers {
+            let me = Arc::clone(&exec);
+            std::thread::Builder::new()
+                .name(format!("flatmesh-claim-{k}"))
+                .spawn(move || me.claim_loop(k))?;
+        }
+        let me = Arc::clone(&exec);
+        std::thread::Builder::new()
+            .name("flatmesh-heartbeat".into())
+            .spawn(move || me.heartbeat_loop())?;
+        Ok(exec)
     }
 
-    /// Jobs waiting for a worker.
+    /// Jobs waiting for a worker, in the store (all processes).
     pub fn queued(&self) -> usize {
-        self.queued.load(Ordering::Relaxed)
+        self.store.count_with_status(Status::Queued).unwrap_or(0)
     }
-    /// Jobs on a worker.
+    /// Jobs running in this process.
     pub fn running(&self) -> usize {
         self.running.load(Ordering::Relaxed)
     }
-    /// Whether the queue can take another job.
+    /// Whether the queue has room for another job.
     pub fn has_room(&self) -> bool {
         self.queued() < self.limits.max_queued
     }
 
-    /// Reserve a queue slot; false when the queue is full. Release with [`Executor::release`]
-    /// unless the job is then [`Executor::enqueue`]d.
+    /// Room for one more queued job (the queue is the store's, shared by every process).
     pub fn reserve(&self) -> bool {
-        self.queued
-            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |q| {
-                (q < self.limits.max_queued).then_some(q + 1)
-            })
-            .is_ok()
+        self.has_room()
     }
-    /// Give back a reserved slot.
-    pub fn release(&self) {
-        self.queued.fetch_sub(1, Ordering::AcqRel);
-    }
+    /// Undo [`Executor::reserve`] (nothing to undo: the queue is counted in the store).
+    pub fn release(&self) {}
 
-    /// Live progress of a queued or running job.
+    /// The in-memory state of a job running in this process.
     pub fn live(&self, id: &str) -> Option<Arc<Live>> {
         self.live
             .lock()
@@ -199,121 +229,187 @@ impl Executor {
             .cloned()
     }
 
-    fn lock_transition(&self) -> std::sync::MutexGuard<'_, ()> {
-        self.transition.lock().unwrap_or_else(|e| e.into_inner())
+    /// A job was queued: wake an idle claim loop (other processes find it by polling).
+    pub fn enqueue(&self, _id: String, _reserved: bool) {
+        self.metrics.set_queued(self.queued());
+        self.wake_workers();
     }
 
-    /// Put a stored, queued job on the pool; its slot must be reserved (or, at recovery,
-    /// counted by this call).
-    pub fn enqueue(self: &Arc<Self>, id: String, reserved: bool) {
-        if !reserved {
-            self.queued.fetch_add(1, Ordering::AcqRel);
+    fn wake_workers(&self) {
+        let (m, cv) = &self.wake;
+        *m.lock().unwrap_or_else(|e| e.into_inner()) += 1;
+        cv.notify_all();
+    }
+
+    /// Wait until woken or [`POLL`] has passed, whichever is first.
+    fn wait_for_work(&self, seen: u64) -> u64 {
+        let (m, cv) = &self.wake;
+        let g = m.lock().unwrap_or_else(|e| e.into_inner());
+        if *g != seen {
+            return *g;
         }
+        let (g, _) = cv.wait_timeout(g, POLL).unwrap_or_else(|e| e.into_inner());
+        *g
+    }
+
+    /// At start-up: jobs whose lease ran out (their process died) are queued again. Returns
+    /// how many jobs are queued and how many were cancelled while their process was down.
+    pub fn recover(self: &Arc<Self>) -> Result<(usize, usize), StoreError> {
+        let cancelled = self.requeue_expired()?;
+        Ok((self.queued(), cancelled))
+    }
+
+    /// Queue again the running jobs whose lease ran out; returns how many ended cancelled.
+    fn requeue_expired(&self) -> Result<usize, StoreError> {
+        let now = now_ms();
+        let back = self.store.requeue_expired(now, now + self.retention_ms())?;
+        let mut cancelled = 0;
+        for j in &back {
+            if j.status == Status::Cancelled {
+                cancelled += 1;
+                self.metrics.finished(Status::Cancelled);
+                self.webhooks.notify(j);
+            } else {
+                tracing::warn!(job = %j.id, attempts = j.attempts, "lease ran out; job queued again");
+            }
+        }
+        if back.len() > cancelled {
+            self.wake_workers();
+        }
+        Ok(cancelled)
+    }
+
+    fn retention_ms(&self) -> i64 {
+        self.limits.retention.as_millis() as i64
+    }
+
+    fn lease_ms(&self) -> i64 {
+        self.limits.lease.as_millis().max(1) as i64
+    }
+
+    /// Cancel a job: a queued one ends at once; a running one (in any process) stops at its
+    /// worker's next heartbeat. None when there is no such job; `Err` with the job when it had
+    /// already ended.
+    pub fn cancel(&self, id: &str) -> Result<Option<Result<JobRecord, JobRecord>>, StoreError> {
+        let now = now_ms();
+        Ok(
+            match self
+                .store
+                .request_cancel(id, now, now + self.retention_ms())?
+            {
+                CancelOutcome::NotFound => None,
+                CancelOutcome::Cancelled(j) => {
+                    self.metrics.finished(Status::Cancelled);
+                    self.metrics.set_queued(self.queued());
+                    self.webhooks.notify(&j);
+                    Some(Ok(j))
+                }
+                CancelOutcome::Requested(j) => {
+                    if let Some(l) = self.live(id) {
+                        l.cancel.store(true, Ordering::Relaxed);
+                    }
+                    Some(Ok(j))
+                }
+                CancelOutcome::Ended(j) => Some(Err(j)),
+            },
+        )
+    }
+
+    /// One claim loop: take the oldest queued job, run it, repeat; idle, wait for a wake-up.
+    fn claim_loop(self: Arc<Self>, k: usize) {
+        let worker = format!("{}/{k}", self.worker);
+        let mut seen = 0;
+        loop {
+            match self.store.claim(&worker, now_ms(), self.lease_ms()) {
+                Ok(Some(job)) => {
+                    self.metrics.set_queued(self.queued());
+                    self.run_claimed(&worker, job);
+                }
+                Ok(None) => seen = self.wait_for_work(seen),
+                Err(e) => {
+                    tracing::error!(error = %e, "cannot claim a job");
+                    seen = self.wait_for_work(seen);
+                }
+            }
+        }
+    }
+
+    /// Renew the leases of the jobs running here (with their progress), pass cancels
+    /// requested anywhere on to them, and queue again the jobs of processes that died.
+    fn heartbeat_loop(self: Arc<Self>) {
+        let every = (self.limits.lease / 4).max(Duration::from_millis(20));
+        loop {
+            std::thread::sleep(every);
+            let running: Vec<(String, Arc<Live>)> = self
+                .live
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .iter()
+                .map(|(id, l)| (id.clone(), Arc::clone(l)))
+                .collect();
+            for (id, l) in running {
+                let progress = if l.progress_dirty.swap(false, Ordering::Relaxed) {
+                    l.progress.lock().unwrap_or_else(|e| e.into_inner()).clone()
+                } else {
+                    None
+                };
+                match self.store.heartbeat(
+                    &l.worker,
+                    &id,
+                    now_ms(),
+                    self.lease_ms(),
+                    progress.as_ref(),
+                ) {
+                    Ok(Lease::Held { cancel_requested }) => {
+                        if cancel_requested {
+                            l.cancel.store(true, Ordering::Relaxed);
+                        }
+                    }
+                    Ok(Lease::Lost) => {
+                        l.lost.store(true, Ordering::Relaxed);
+                        l.cancel.store(true, Ordering::Relaxed);
+                    }
+                    Err(e) => tracing::error!(job = %id, error = %e, "heartbeat failed"),
+                }
+            }
+            if let Err(e) = self.requeue_expired() {
+                tracing::error!(error = %e, "cannot requeue expired jobs");
+            }
+            self.metrics.set_queued(self.queued());
+        }
+    }
+
+    /// Run a job this worker holds and record how it ended (only while it still holds it).
+    fn run_claimed(&self, worker: &str, mut job: JobRecord) {
+        let id = job.id.clone();
+        if job.attempts > self.limits.max_attempts {
+            job.status = Status::Failed;
+            job.finished_at = Some(now_ms());
+            job.expires_at = Some(now_ms() + self.retention_ms());
+            job.error = Some(Problem::new(
+                StatusCode::INTERNAL_SERVER_ERROR,
+                "interrupted",
+                format!(
+                    "the job was interrupted {} times (its process stopped while running it; \
+                     limit {})",
+                    job.attempts - 1,
+                    self.limits.max_attempts
+                ),
+            ));
+            if let Ok(true) = self.store.finish(worker, &job) {
+                self.metrics.finished(Status::Failed);
+                self.webhooks.notify(&job);
+            }
+            return;
+        }
+        let live = Arc::new(Live {
+            worker: worker.to_string(),
+            ..Live::default()
+        });
         self.live
             .lock()
             .unwrap_or_else(|e| e.into_inner())
-            .insert(id.clone(), Arc::new(Live::default()));
-        self.metrics.set_queued(self.queued());
-        let me = Arc::clone(self);
-        self.pool.spawn(move || me.work(id));
-    }
-
-    /// After a restart: re-queue jobs that were running (up to `max_attempts` runs) and
-    /// queue everything that was waiting, in submission order.
-    pub fn recover(self: &Arc<Self>) -> Result<(usize, usize), StoreError> {
-        let mut failed = 0;
-        for mut j in self.store.jobs_with_status(Status::Running)? {
-            if j.attempts >= self.limits.max_attempts {
-                j.status = Status::Failed;
-                j.finished_at = Some(now_ms());
-                j.expires_at = Some(now_ms() + self.limits.retention.as_millis() as i64);
-                j.error = Some(Problem::new(
-                    StatusCode::INTERNAL_SERVER_ERROR,
-                    "interrupted",
-                    format!(
-                        "the server stopped while the job was running, {} times (limit {})",
-                        j.attempts, self.limits.max_attempts
-                    ),
-                ));
-                failed += 1;
-            } else {
-                j.status = Status::Queued;
-                j.progress = None;
-                j.outcome = None;
-            }
-            self.store.update_job(&j)?;
-        }
-        let queued = self.store.jobs_with_status(Status::Queued)?;
-        let n = queued.len();
-        for j in queued {
-            self.enqueue(j.id, false);
-        }
-        Ok((n, failed))
-    }
-
-    /// Cancel a job: a queued job ends at once, a running one is asked to stop (it ends at
-    /// its next iteration). Returns the job as it is now; `Err(job)` when already finished.
-    pub fn cancel(&self, id: &str) -> Result<Option<Result<JobRecord, JobRecord>>, StoreError> {
-        let _t = self.lock_transition();
-        let Some(mut j) = self.store.get_job(id)? else {
-            return Ok(None);
-        };
-        match j.status {
-            Status::Queued => {
-                if let Some(l) = self.live(id) {
-                    l.cancel.store(true, Ordering::Relaxed);
-                }
-                j.status = Status::Cancelled;
-                j.finished_at = Some(now_ms());
-                j.expires_at = Some(now_ms() + self.limits.retention.as_millis() as i64);
-                self.store.update_job(&j)?;
-                self.metrics.finished(Status::Cancelled);
-                self.webhooks.notify(&j);
-                Ok(Some(Ok(j)))
-            }
-            Status::Running => {
-                if let Some(l) = self.live(id) {
-                    l.cancel.store(true, Ordering::Relaxed);
-                }
-                Ok(Some(Ok(j)))
-            }
-            _ => Ok(Some(Err(j))),
-        }
-    }
-
-    /// Worker body: one job.
-    fn work(self: Arc<Self>, id: String) {
-        self.queued.fetch_sub(1, Ordering::AcqRel);
-        self.metrics.set_queued(self.queued());
-        let live = self.live(&id).unwrap_or_default();
-        let job = {
-            let _t = self.lock_transition();
-            match self.store.get_job(&id) {
-                Ok(Some(mut j)) if j.status == Status::Queued => {
-                    j.status = Status::Running;
-                    j.started_at = Some(now_ms());
-                    j.attempts += 1;
-                    if let Err(e) = self.store.update_job(&j) {
-                        tracing::error!(job = %id, error = %e, "cannot start job");
-                        None
-                    } else {
-                        Some(j)
-                    }
-                }
-                Ok(_) => None, // cancelled or deleted while queued
-                Err(e) => {
-                    tracing::error!(job = %id, error = %e, "cannot load job");
-                    None
-                }
-            }
-        };
-        let Some(mut job) = job else {
-            self.live
-                .lock()
-                .unwrap_or_else(|e| e.into_inner())
-                .remove(&id);
-            return;
-        };
+            .insert(id.clone(), Arc::clone(&live));
         self.running.fetch_add(1, Ordering::AcqRel);
         self.metrics.set_running(self.running());
         let start = Instant::now();
@@ -322,15 +418,70 @@ impl Executor {
             deadline: start + self.limits.time_limit,
             timed_out: AtomicBool::new(false),
         };
-        tracing::info!(job = %id, kind = %job.kind, attempt = job.attempts, "job started");
-        let result = catch_unwind(AssertUnwindSafe(|| self.execute(&job, &control)));
+        tracing::info!(job = %id, kind = %job.kind, attempt = job.attempts, worker, "job started");
+        let result = self
+            .pool
+            .install(|| catch_unwind(AssertUnwindSafe(|| self.execute(&job, &control))));
         let seconds = start.elapsed().as_secs_f64();
-        let mut reached = None;
-        let (status, error, artifacts) = match result {
-            Ok(Ok((artifacts, outcome))) => {
-                reached = Some(outcome);
-                (Status::Succeeded, None, artifacts)
+        let (status, error, artifacts, reached) = self.ending(&job, &control, result);
+        job.status = status;
+        job.error = error;
+        job.artifacts = artifacts;
+        job.outcome = reached;
+        job.progress = live
+            .progress
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone();
+        job.finished_at = Some(now_ms());
+        job.expires_at = Some(now_ms() + self.retention_ms());
+        let recorded = !live.lost.load(Ordering::Relaxed)
+            && match self.store.finish(worker, &job) {
+                Ok(held) => held,
+                Err(e) => {
+                    tracing::error!(job = %id, error = %e, "cannot record job end");
+                    false
+                }
+            };
+        self.live
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .remove(&id);
+        self.running.fetch_sub(1, Ordering::AcqRel);
+        self.metrics.set_running(self.running());
+        if !recorded {
+            // Deleted while running, or its lease ran out and the job is queued again: what
+            // it produced is dropped (a deleted job's files go with it).
+            if matches!(self.store.get_job(&id), Ok(None)) {
+                let _ = self.store.delete_blobs(&format!("jobs/{id}"));
             }
+            tracing::warn!(job = %id, "job no longer held by this worker; its result is dropped");
+            return;
+        }
+        self.metrics.finished(status);
+        self.metrics.job_seconds(seconds);
+        tracing::info!(job = %id, status = status.as_str(), seconds, "job ended");
+        self.webhooks.notify(&job);
+    }
+
+    /// Status, error, artifacts and outcome of a run.
+    #[allow(clippy::type_complexity)]
+    fn ending(
+        &self,
+        job: &JobRecord,
+        control: &JobControl<'_>,
+        result: Result<
+            Result<(Vec<String>, serde_json::Value), ExecError>,
+            Box<dyn std::any::Any + Send>,
+        >,
+    ) -> (
+        Status,
+        Option<Problem>,
+        Vec<String>,
+        Option<serde_json::Value>,
+    ) {
+        match result {
+            Ok(Ok((artifacts, outcome))) => (Status::Succeeded, None, artifacts, Some(outcome)),
             Ok(Err(ExecError::Algo(AlgoError::Cancelled))) => {
                 if control.timed_out.load(Ordering::Relaxed) {
                     let p = Problem::new(
@@ -341,9 +492,9 @@ impl Executor {
                             self.limits.time_limit.as_secs_f64()
                         ),
                     );
-                    (Status::Failed, Some(p), vec![])
+                    (Status::Failed, Some(p), vec![], None)
                 } else {
-                    (Status::Cancelled, None, vec![])
+                    (Status::Cancelled, None, vec![], None)
                 }
             }
             Ok(Err(ExecError::Algo(e @ AlgoError::InvalidParam { .. }))) => {
@@ -357,6 +508,7 @@ impl Executor {
                     Status::Failed,
                     Some(Problem::invalid(&field, e.to_string())),
                     vec![],
+                    None,
                 )
             }
             Ok(Err(ExecError::Algo(e))) => (
@@ -367,11 +519,12 @@ impl Executor {
                     e.to_string(),
                 )),
                 vec![],
+                None,
             ),
-            Ok(Err(ExecError::Input(p))) => (Status::Failed, Some(p), vec![]),
+            Ok(Err(ExecError::Input(p))) => (Status::Failed, Some(p), vec![], None),
             Err(panic) => {
                 let msg = panic_message(panic.as_ref());
-                tracing::error!(job = %id, panic = %msg, "job panicked");
+                tracing::error!(job = %job.id, panic = %msg, "job panicked");
                 (
                     Status::Failed,
                     Some(Problem::internal(format!(
@@ -379,44 +532,10 @@ impl Executor {
                         job.kind
                     ))),
                     vec![],
+                    None,
                 )
             }
-        };
-        {
-            let _t = self.lock_transition();
-            // Deleted while running: drop what it produced.
-            match self.store.get_job(&id) {
-                Ok(Some(_)) => {
-                    job.status = status;
-                    job.error = error;
-                    job.artifacts = artifacts;
-                    job.outcome = reached;
-                    job.progress = live
-                        .progress
-                        .lock()
-                        .unwrap_or_else(|e| e.into_inner())
-                        .clone();
-                    job.finished_at = Some(now_ms());
-                    job.expires_at = Some(now_ms() + self.limits.retention.as_millis() as i64);
-                    if let Err(e) = self.store.update_job(&job) {
-                        tracing::error!(job = %id, error = %e, "cannot record job end");
-                    }
-                }
-                _ => {
-                    let _ = self.store.delete_blobs(&format!("jobs/{id}"));
-                }
-            }
-            self.live
-                .lock()
-                .unwrap_or_else(|e| e.into_inner())
-                .remove(&id);
         }
-        self.running.fetch_sub(1, Ordering::AcqRel);
-        self.metrics.set_running(self.running());
-        self.metrics.finished(status);
-        self.metrics.job_seconds(seconds);
-        tracing::info!(job = %id, status = status.as_str(), seconds, "job ended");
-        self.webhooks.notify(&job);
     }
 
     /// Load the inputs, run the algorithm, store the artifacts. Returns their names and what
@@ -480,7 +599,6 @@ impl Executor {
     pub fn sweep(&self) -> Result<usize, StoreError> {
         let expired = self.store.expired_jobs(now_ms())?;
         for j in &expired {
-            let _t = self.lock_transition();
             self.store.delete_blobs(&format!("jobs/{}", j.id))?;
             self.store.delete_job(&j.id)?;
         }
@@ -489,7 +607,6 @@ impl Executor {
 
     /// Delete a job: a running job is cancelled first; its row and artifacts go.
     pub fn delete(&self, id: &str) -> Result<bool, StoreError> {
-        let _t = self.lock_transition();
         if let Some(l) = self.live(id) {
             l.cancel.store(true, Ordering::Relaxed);
         }
@@ -607,6 +724,7 @@ mod tests {
             retention: Duration::from_secs(60),
             max_attempts: 3,
             nice: 10,
+            lease: Duration::from_secs(5),
         };
         let exec = Executor::with_runner(store.clone(), limits, metrics, hooks, runner).unwrap();
         let obj = std::fs::read("fixtures/flat_disk.obj").unwrap();

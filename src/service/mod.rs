@@ -113,6 +113,10 @@ pub struct Config {
     /// Runs of a job interrupted by a restart before it fails.
     #[arg(long, env = "FLATMESH_MAX_ATTEMPTS", default_value_t = 3)]
     pub max_attempts: u32,
+    /// How long a worker's claim on a running job lasts without a heartbeat (it renews it
+    /// every quarter of that): a job whose process died runs again after this, e.g. `30s`.
+    #[arg(long, env = "FLATMESH_LEASE", default_value = "30s", value_parser = parse_duration)]
+    pub lease: Duration,
     /// Nice value of the job threads (Linux; 0-19): higher keeps HTTP answers fast while
     /// every worker is busy.
     #[arg(long, env = "FLATMESH_WORKER_NICE", default_value_t = 10, value_parser = clap::value_parser!(i32).range(0..=19))]
@@ -372,6 +376,7 @@ async fn serve_async(cfg: Config) -> Result<(), String> {
         retention: cfg.retention,
         max_attempts: cfg.max_attempts,
         nice: cfg.worker_nice,
+        lease: cfg.lease,
     };
     let exec = jobs::Executor::new(store.clone(), limits, metrics.clone(), webhooks.clone())
         .map_err(|e| e.to_string())?;
