@@ -1,6 +1,8 @@
-//! The executor: jobs run on a dedicated rayon pool (never on the async runtime's threads),
-//! behind a bounded queue, with a per-job time limit, cooperative cancellation through the
-//! algorithms' [`Control`], and panics caught and turned into a failed job.
+//! The executor: jobs are claimed from the store's queue (bounded, shared by every process on
+//! the store) under a lease, run on a dedicated rayon pool (never on the async runtime's
+//! threads) with a per-job time limit, cooperative cancellation through the algorithms'
+//! [`Control`] (cancels requested through any process arrive with the heartbeat), and panics
+//! caught and turned into a failed job.
 
 use super::metrics::Metrics;
 use super::problem::Problem;

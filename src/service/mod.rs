@@ -380,8 +380,8 @@ async fn serve_async(cfg: Config) -> Result<(), String> {
     };
     let exec = jobs::Executor::new(store.clone(), limits, metrics.clone(), webhooks.clone())
         .map_err(|e| e.to_string())?;
-    let (requeued, failed) = exec.recover().map_err(|e| format!("recovery: {e}"))?;
-    tracing::info!(requeued, failed, workers, "store recovered");
+    let (queued, cancelled) = exec.recover().map_err(|e| format!("recovery: {e}"))?;
+    tracing::info!(queued, cancelled, workers, "store recovered");
     let st = AppState {
         store,
         exec: exec.clone(),
