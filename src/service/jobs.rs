@@ -641,27 +641,8 @@ mod tests {
     }
 
     fn job(id: &str, mesh_id: &str, boom: bool) -> JobRecord {
-        JobRecord {
-            seq: 0,
-            id: id.into(),
-            kind: if boom { "fl-mesh" } else { "report" }.into(),
-            mesh_id: mesh_id.into(),
-            reference_mesh_id: None,
-            params: serde_json::Map::new(),
-            callback_url: None,
-            status: Status::Queued,
-            progress: None,
-            error: None,
-            created_at: now_ms(),
-            started_at: None,
-            finished_at: None,
-            expires_at: None,
-            attempts: 0,
-            artifacts: vec![],
-            idempotency_key: None,
-            request_hash: None,
-            outcome: None,
-        }
+        let kind = if boom { "fl-mesh" } else { "report" };
+        JobRecord::queued(id, kind, mesh_id, now_ms())
     }
 
     fn wait_end(store: &dyn Store, id: &str) -> JobRecord {

@@ -128,6 +128,33 @@ pub struct JobRecord {
     pub request_hash: Option<String>,
 }
 
+impl JobRecord {
+    /// A queued job of `kind` on mesh `mesh_id` with no parameters, callback or history.
+    pub fn queued(id: &str, kind: &str, mesh_id: &str, created_at: i64) -> JobRecord {
+        JobRecord {
+            seq: 0,
+            id: id.into(),
+            kind: kind.into(),
+            mesh_id: mesh_id.into(),
+            reference_mesh_id: None,
+            params: serde_json::Map::new(),
+            callback_url: None,
+            status: Status::Queued,
+            progress: None,
+            error: None,
+            created_at,
+            started_at: None,
+            finished_at: None,
+            expires_at: None,
+            attempts: 0,
+            artifacts: vec![],
+            outcome: None,
+            idempotency_key: None,
+            request_hash: None,
+        }
+    }
+}
+
 /// Filters and page of `GET /v1/jobs`.
 #[derive(Debug, Clone, Default)]
 pub struct JobFilter {

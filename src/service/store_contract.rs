@@ -10,27 +10,7 @@ use std::sync::Arc;
 const LEASE: i64 = 10_000;
 
 fn queued(id: &str) -> JobRecord {
-    JobRecord {
-        seq: 0,
-        id: id.into(),
-        kind: "report".into(),
-        mesh_id: "m_x".into(),
-        reference_mesh_id: None,
-        params: serde_json::Map::new(),
-        callback_url: None,
-        status: Status::Queued,
-        progress: None,
-        error: None,
-        created_at: 0,
-        started_at: None,
-        finished_at: None,
-        expires_at: None,
-        attempts: 0,
-        artifacts: vec![],
-        outcome: None,
-        idempotency_key: None,
-        request_hash: None,
-    }
+    JobRecord::queued(id, "report", "m_x", 0)
 }
 
 fn status(s: &dyn Store, id: &str) -> Status {
