@@ -1,228 +1,14 @@
 //! Black-box tests of `flatmesh serve`: the real binary on a random loopback port, spoken to
 //! with reqwest. Every JSON body seen is validated against the schemas of openapi.yaml.
 
+mod common;
+
 use base64::Engine;
+use common::*;
 use serde_json::{json, Value};
-use std::io::{BufRead, BufReader};
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::path::Path;
+use std::process::Command;
 use std::time::{Duration, Instant};
-
-// ---------------------------------------------------------------- harness
-
-struct Server {
-    child: Child,
-    base: String,
-    dir: PathBuf,
-}
-
-impl Server {
-    fn start(dir: &Path, args: &[&str]) -> Server {
-        std::fs::create_dir_all(dir).unwrap();
-        let log = std::fs::OpenOptions::new()
-            .create(true)
-            .append(true)
-            .open(dir.join("server.log"))
-            .unwrap();
-        let mut child = Command::new(env!("CARGO_BIN_EXE_flatmesh"))
-            .arg("serve")
-            .args(["--bind", "127.0.0.1:0", "--data-dir"])
-            .arg(dir)
-            .args(args)
-            .env_remove("FLATMESH_API_KEYS")
-            .stdout(Stdio::piped())
-            .stderr(Stdio::from(log))
-            .spawn()
-            .expect("start flatmesh serve");
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap())
-            .read_line(&mut line)
-            .unwrap();
-        let base = line
-            .trim()
-            .strip_prefix("listening on ")
-            .unwrap_or_else(|| panic!("unexpected first line {line:?}"))
-            .to_string();
-        Server {
-            child,
-            base,
-            dir: dir.to_path_buf(),
-        }
-    }
-    fn url(&self, path: &str) -> String {
-        format!("{}{}", self.base, path)
-    }
-    fn pid(&self) -> u32 {
-        self.child.id()
-    }
-    /// SIGKILL: the process dies without any chance to tidy up.
-    fn kill(mut self) -> PathBuf {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-        self.dir.clone()
-    }
-}
-
-impl Drop for Server {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("flatmesh-svc-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    d
-}
-
-fn fixture(name: &str) -> Vec<u8> {
-    std::fs::read(format!("fixtures/{name}.obj")).expect("fixture file")
-}
-
-/// A saddle z = 0.3(x² − y²) on an n×n grid: flattening it with a tolerance that cannot be
-/// reached keeps a worker busy for seconds, checking cancellation every iteration.
-fn saddle_obj(n: usize) -> Vec<u8> {
-    let mut s = String::new();
-    for j in 0..=n {
-        for i in 0..=n {
-            let x = i as f64 / n as f64 * 2.0 - 1.0;
-            let y = j as f64 / n as f64 * 2.0 - 1.0;
-            s += &format!("v {x:.6} {y:.6} {:.6}\n", 0.3 * (x * x - y * y));
-        }
-    }
-    for j in 0..n {
-        for i in 0..n {
-            let a = j * (n + 1) + i + 1;
-            let (b, c) = (a + 1, a + n + 1);
-            s += &format!("f {a} {b} {}\nf {a} {} {c}\n", c + 1, c + 1);
-        }
-    }
-    s.into_bytes()
-}
-
-const SLOW: &str = r#"{"tolerance": 1e-300, "max_iterations": 100000}"#;
-
-// ---------------------------------------------------------------- openapi
-
-fn openapi() -> Value {
-    let text = std::fs::read_to_string("src/service/openapi.yaml").unwrap();
-    let y: serde_yaml::Value = serde_yaml::from_str(&text).unwrap();
-    serde_json::to_value(y).unwrap()
-}
-
-/// Validate `v` against `#/components/schemas/{name}` of openapi.yaml (JSON Schema 2020-12).
-fn check(name: &str, v: &Value) {
-    thread_local! {
-        static DOC: Value = openapi();
-    }
-    DOC.with(|doc| {
-        let mut schema = doc.clone();
-        schema["$ref"] = json!(format!("#/components/schemas/{name}"));
-        let validator = jsonschema::validator_for(&schema).expect("schema compiles");
-        let errors: Vec<String> = validator
-            .iter_errors(v)
-            .map(|e| format!("{} at {}", e, e.instance_path()))
-            .collect();
-        assert!(
-            errors.is_empty(),
-            "{name} does not match openapi.yaml: {errors:?}\n{v:#}"
-        );
-    });
-}
-
-async fn json_of(res: reqwest::Response, schema: &str) -> Value {
-    let v: Value = res.json().await.expect("JSON body");
-    check(schema, &v);
-    v
-}
-
-/// Assert a problem+json answer of `status`, valid against the schema; returns it.
-async fn problem(res: reqwest::Response, status: u16) -> Value {
-    assert_eq!(res.status().as_u16(), status, "status");
-    assert_eq!(
-        res.headers()["content-type"].to_str().unwrap(),
-        "application/problem+json"
-    );
-    let v = json_of(res, "Problem").await;
-    assert_eq!(v["status"], status);
-    v
-}
-
-/// A multipart part holding fixture `name` as an OBJ file called `file`.
-fn obj_part(name: &str, file: &str) -> reqwest::multipart::Part {
-    reqwest::multipart::Part::bytes(fixture(name))
-        .file_name(file.to_string())
-        .mime_str("model/obj")
-        .unwrap()
-}
-
-/// `POST /v1/jobs` with a multipart body.
-async fn post_jobs_form(
-    c: &reqwest::Client,
-    s: &Server,
-    form: reqwest::multipart::Form,
-) -> reqwest::Response {
-    c.post(s.url("/v1/jobs"))
-        .multipart(form)
-        .send()
-        .await
-        .unwrap()
-}
-
-fn client() -> reqwest::Client {
-    reqwest::Client::builder()
-        .timeout(Duration::from_secs(60))
-        .build()
-        .unwrap()
-}
-
-async fn upload(c: &reqwest::Client, s: &Server, bytes: Vec<u8>) -> Value {
-    let r = c
-        .post(s.url("/v1/meshes"))
-        .header("content-type", "model/obj")
-        .body(bytes)
-        .send()
-        .await
-        .unwrap();
-    assert_eq!(r.status(), 201);
-    json_of(r, "Mesh").await
-}
-
-async fn submit(c: &reqwest::Client, s: &Server, body: Value) -> Value {
-    check("JobRequest", &body);
-    let r = c.post(s.url("/v1/jobs")).json(&body).send().await.unwrap();
-    assert_eq!(r.status(), 202, "{:?}", r.text().await);
-    json_of(r, "Job").await
-}
-
-async fn job(c: &reqwest::Client, s: &Server, id: &str) -> Value {
-    let r = c
-        .get(s.url(&format!("/v1/jobs/{id}")))
-        .send()
-        .await
-        .unwrap();
-    assert_eq!(r.status(), 200);
-    json_of(r, "Job").await
-}
-
-async fn wait_for(c: &reqwest::Client, s: &Server, id: &str, want: &[&str]) -> Value {
-    let start = Instant::now();
-    loop {
-        let j = job(c, s, id).await;
-        if want.contains(&j["status"].as_str().unwrap()) {
-            return j;
-        }
-        assert!(
-            start.elapsed() < Duration::from_secs(120),
-            "job {id} still {} (waiting for {want:?})",
-            j["status"]
-        );
-        tokio::time::sleep(Duration::from_millis(50)).await;
-    }
-}
-
-// ---------------------------------------------------------------- tests
 
 #[test]
 fn routes_and_openapi_agree() {
@@ -235,7 +21,7 @@ fn routes_and_openapi_agree() {
             }
         }
     }
-    let routes: std::collections::BTreeSet<_> = flatmesh::service::ROUTES
+    let routes: std::collections::BTreeSet<_> = flatmesh::service::routes()
         .iter()
         .map(|(m, p)| (m.to_string(), p.to_string()))
         .collect();
@@ -342,7 +128,7 @@ fn webhook_signature_matches_standard_example() {
 async fn every_route_is_served() {
     let s = Server::start(&tmp("routes"), &[]);
     let c = client();
-    for (m, p) in flatmesh::service::ROUTES {
+    for (m, p) in flatmesh::service::routes() {
         let path = p.replace("{id}", "x");
         let r = c
             .request(m.to_uppercase().parse().unwrap(), s.url(&path))
@@ -528,15 +314,21 @@ async fn meshes_upload_report_delete() {
     problem(c.delete(s.url(&loc)).send().await.unwrap(), 404).await;
 }
 
-/// Each job kind end to end on fixtures, with results checked against the library.
+/// Every kind of the registry has its own end-to-end test below, named `{kind}_job_end_to_end`.
+#[test]
+fn every_kind_has_an_end_to_end_test() {
+    let src = std::fs::read_to_string("tests/service.rs").unwrap();
+    for k in flatmesh::jobs::Kind::ALL {
+        let name = format!("async fn {}_job_end_to_end()", k.name().replace('-', "_"));
+        assert!(src.contains(&name), "no `{name}` in tests/service.rs");
+    }
+}
+
+/// A report job: its result is the library's report, its mesh the input in every format.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn every_kind_end_to_end() {
-    let s = Server::start(&tmp("kinds"), &[]);
+async fn report_job_end_to_end() {
+    let s = Server::start(&tmp("k-report"), &[]);
     let c = client();
-    assert_eq!(
-        flatmesh::jobs::Kind::names(),
-        ["report", "flatten", "fl-mesh", "subdivide"]
-    );
     let bytes = fixture("tube_two_panels");
     let (mesh, w) = flatmesh::io::load(&bytes, flatmesh::io::Format::Obj).unwrap();
     let m = upload(&c, &s, bytes.clone()).await;
@@ -617,6 +409,16 @@ async fn every_kind_end_to_end() {
         404,
     )
     .await;
+}
+
+/// Flatten jobs on a developable fixture and a two-panel tube, checked against 3D lengths.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn flatten_job_end_to_end() {
+    let s = Server::start(&tmp("k-flatten"), &[]);
+    let c = client();
+    let bytes = fixture("tube_two_panels");
+    let m = upload(&c, &s, bytes.clone()).await;
+    let mid = m["id"].as_str().unwrap();
 
     // flatten on a developable fixture: every pattern edge as long as its 3D edge
     let cyl = fixture("cylinder");
@@ -694,6 +496,13 @@ async fn every_kind_end_to_end() {
     check("Patterns", &pat);
     assert_eq!(pat["pieces"].as_array().unwrap().len(), 2);
     assert_eq!(pat["seams"].as_array().unwrap().len(), 2);
+}
+
+/// An fl-mesh job on the noisy cone, its download checked with the library's own measure.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn fl_mesh_job_end_to_end() {
+    let s = Server::start(&tmp("k-flmesh"), &[]);
+    let c = client();
 
     // fl-mesh on the noisy cone: the downloaded mesh is flattenable by the library's own
     // measure, boundary vertices are where they were, and its patterns are isometric.
@@ -812,6 +621,16 @@ async fn every_kind_end_to_end() {
         done["max_flattenability"].as_f64().unwrap() > 1e-12,
         "{done}"
     );
+}
+
+/// A subdivide job with a curve on a rim edge, and one with a curve it must refuse.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn subdivide_job_end_to_end() {
+    let s = Server::start(&tmp("k-subdivide"), &[]);
+    let c = client();
+    let cone = fixture("cone_noisy");
+    let (kmesh, _) = flatmesh::io::load(&cone, flatmesh::io::Format::Obj).unwrap();
+    let km = upload(&c, &s, cone).await;
 
     // subdivide, one level, with a curve on a rim edge of the cone: level 1 downloadable in
     // every format and flattenable; no level 2; a bad level is named.
@@ -909,6 +728,25 @@ async fn every_kind_end_to_end() {
             .contains("curves[0].edge"),
         "{done}"
     );
+}
+
+/// The job resource: multipart submit, list/filter/paginate, ETag, delete, cancel of an ended job.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn jobs_multipart_list_etag_delete() {
+    let s = Server::start(&tmp("k-jobs"), &[]);
+    let c = client();
+    let bytes = fixture("tube_two_panels");
+    let m = upload(&c, &s, bytes.clone()).await;
+    let mid = m["id"].as_str().unwrap();
+    let id = submit(&c, &s, json!({"kind": "report", "mesh_id": mid})).await["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    for _ in 0..2 {
+        let j = submit(&c, &s, json!({"kind": "flatten", "mesh_id": mid})).await;
+        wait_for(&c, &s, j["id"].as_str().unwrap(), &["succeeded"]).await;
+    }
+    wait_for(&c, &s, &id, &["succeeded"]).await;
 
     // multipart submit: job + mesh in one request
     let form = reqwest::multipart::Form::new()
@@ -940,7 +778,7 @@ async fn every_kind_end_to_end() {
         "JobList",
     )
     .await;
-    assert_eq!(all["jobs"].as_array().unwrap().len(), 8);
+    assert_eq!(all["jobs"].as_array().unwrap().len(), 4);
     let fl = json_of(
         c.get(s.url("/v1/jobs?kind=flatten&status=succeeded"))
             .send()

@@ -11,6 +11,6 @@ fn sqlite_store_keeps_the_coordination_contract() {
     let _ = std::fs::remove_dir_all(&dir);
     let store = SqliteStore::open(&dir).unwrap();
     let open = || -> Arc<dyn Store> { Arc::new(SqliteStore::open(&dir).unwrap()) };
-    flatmesh::service::store_contract::check(&store, &open);
+    flatmesh::service::store::contract::check(&store, &open);
     let _ = std::fs::remove_dir_all(&dir);
 }

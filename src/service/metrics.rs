@@ -1,6 +1,6 @@
 //! Prometheus text metrics, hand-rolled with atomics (a handful of series).
 
-use super::store::Status;
+use super::domain::Status;
 use std::fmt::Write;
 use std::sync::atomic::{AtomicU64, Ordering};
 

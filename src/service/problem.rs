@@ -1,5 +1,7 @@
 //! RFC 9457 problem details (`application/problem+json`), the one error shape of the API.
 
+use super::domain::JobError;
+use super::store::StoreError;
 use axum::http::{header, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
 use serde::{Deserialize, Serialize};
@@ -106,10 +108,25 @@ impl IntoResponse for Problem {
     }
 }
 
-impl From<crate::service::store::StoreError> for Problem {
-    fn from(e: crate::service::store::StoreError) -> Problem {
+impl From<StoreError> for Problem {
+    fn from(e: StoreError) -> Problem {
         tracing::error!(error = %e, "store error");
         Problem::internal(format!("storage error: {e}"))
+    }
+}
+
+/// A failed job's error as the problem object clients see: 500 for faults on our side
+/// (interrupted runs, storage, panics), 422 for the request's.
+impl From<&JobError> for Problem {
+    fn from(e: &JobError) -> Problem {
+        let status = if e.code.is_server_fault() {
+            StatusCode::INTERNAL_SERVER_ERROR
+        } else {
+            StatusCode::UNPROCESSABLE_ENTITY
+        };
+        let mut p = Problem::new(status, e.code.slug(), e.detail.clone());
+        p.field = e.field.clone();
+        p
     }
 }
 

@@ -5,14 +5,37 @@
 //! configuration allows them (checked on submit for literal addresses and again on delivery
 //! after DNS resolution).
 
+use super::domain::{now_ms, JobRecord};
 use super::metrics::Metrics;
-use super::store::JobRecord;
+use super::views::{job_json, rfc3339};
 use base64::Engine;
 use hmac::{Hmac, Mac};
 use sha2::Sha256;
 use std::net::IpAddr;
 use std::sync::Arc;
 use std::time::Duration;
+
+/// The signing key: `secret` when given, else the one kept in `data_dir/webhook_secret`,
+/// generated there on first start.
+pub fn signing_key(secret: Option<&str>, data_dir: &std::path::Path) -> Result<Vec<u8>, String> {
+    if let Some(s) = secret {
+        return decode_secret(s);
+    }
+    let path = data_dir.join("webhook_secret");
+    if let Ok(s) = std::fs::read_to_string(&path) {
+        return decode_secret(&s);
+    }
+    let mut key = Vec::with_capacity(32);
+    key.extend_from_slice(uuid::Uuid::new_v4().as_bytes());
+    key.extend_from_slice(uuid::Uuid::new_v4().as_bytes());
+    let secret = format!(
+        "whsec_{}",
+        base64::engine::general_purpose::STANDARD.encode(&key)
+    );
+    std::fs::write(&path, secret).map_err(|e| format!("{}: {e}", path.display()))?;
+    tracing::info!(path = %path.display(), "generated a webhook signing secret");
+    Ok(key)
+}
 
 /// Webhook sender.
 pub struct Webhooks {
@@ -142,8 +165,8 @@ impl Webhooks {
         };
         let payload = serde_json::json!({
             "type": format!("job.{}", job.status.as_str()),
-            "timestamp": super::api::rfc3339(super::jobs::now_ms()),
-            "data": super::api::job_json(job, None, &self.base),
+            "timestamp": rfc3339(now_ms()),
+            "data": job_json(job, None, &self.base),
         });
         let body = serde_json::to_vec(&payload).unwrap_or_default();
         let msg_id = format!("msg_{}", uuid::Uuid::new_v4().simple());
@@ -200,7 +223,7 @@ async fn deliver(
             }
         }
     }
-    let ts = super::jobs::now_ms() / 1000;
+    let ts = now_ms() / 1000;
     let res = client
         .post(u)
         .header("content-type", "application/json")

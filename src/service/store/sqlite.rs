@@ -1,288 +1,20 @@
-//! Durable state: the job and mesh index behind the [`Store`] trait, with the embedded default
-//! [`SqliteStore`] (SQLite for the index, plain files under the data directory for blobs:
-//! uploaded meshes and job artifacts). A shared database for several replicas implements the
-//! same trait.
+//! The embedded store: a SQLite index (`flatmesh.sqlite3`, WAL) in the data directory, blobs
+//! as files beside it ([`FileBlobs`]). Every coordination step is one statement or one
+//! IMMEDIATE transaction, so several processes may share the directory.
 
-use super::problem::Problem;
+use super::{Blobs, CancelOutcome, FileBlobs, Inserted, JobFilter, Lease, Store, StoreError};
+use crate::service::domain::{JobRecord, MeshRecord, Status};
 use rusqlite::{params, Connection, OptionalExtension};
-use serde::{Deserialize, Serialize};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::Mutex;
 
-/// A storage failure (the service answers 500 and logs it).
-#[derive(Debug, thiserror::Error)]
-pub enum StoreError {
-    /// SQLite said no.
-    #[error("database: {0}")]
-    Db(#[from] rusqlite::Error),
-    /// A blob could not be read or written.
-    #[error("blob {0}: {1}")]
-    Io(String, std::io::Error),
-    /// A stored row does not decode.
-    #[error("corrupt row: {0}")]
-    Corrupt(String),
-}
-
-/// Lifecycle of a job (AIP-151 style): queued → running → succeeded | failed | cancelled.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Status {
-    /// Waiting for a worker.
-    Queued,
-    /// On a worker.
-    Running,
-    /// Finished with results.
-    Succeeded,
-    /// Finished with an error (see `error`).
-    Failed,
-    /// Cancelled by the client.
-    Cancelled,
-}
-
-impl Status {
-    /// The wire name.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Status::Queued => "queued",
-            Status::Running => "running",
-            Status::Succeeded => "succeeded",
-            Status::Failed => "failed",
-            Status::Cancelled => "cancelled",
+impl From<rusqlite::Error> for StoreError {
+    fn from(e: rusqlite::Error) -> StoreError {
+        StoreError::Backend {
+            backend: "sqlite",
+            message: e.to_string(),
         }
     }
-    /// Parse the wire name.
-    pub fn parse(s: &str) -> Option<Status> {
-        Some(match s {
-            "queued" => Status::Queued,
-            "running" => Status::Running,
-            "succeeded" => Status::Succeeded,
-            "failed" => Status::Failed,
-            "cancelled" => Status::Cancelled,
-            _ => return None,
-        })
-    }
-    /// Whether the job has ended.
-    pub fn is_terminal(self) -> bool {
-        matches!(self, Status::Succeeded | Status::Failed | Status::Cancelled)
-    }
-}
-
-/// An uploaded mesh. Its bytes are the blob `meshes/{id}`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct MeshRecord {
-    /// Id (`m_…`).
-    pub id: String,
-    /// Milliseconds since the Unix epoch.
-    pub created_at: i64,
-    /// `obj`, `gltf`, `glb` or `off`.
-    pub format: String,
-    /// Bytes uploaded.
-    pub size: u64,
-    /// Hex SHA-256 of the bytes (the ETag).
-    pub sha256: String,
-    /// Summary shown to clients (vertices, faces, patches, max ϖ, warnings).
-    pub summary: serde_json::Value,
-}
-
-/// A job as stored.
-#[derive(Debug, Clone, PartialEq)]
-pub struct JobRecord {
-    /// Insertion order (list order, page tokens).
-    pub seq: i64,
-    /// Id (`j_…`).
-    pub id: String,
-    /// Job kind (one of `algorithms::KINDS`).
-    pub kind: String,
-    /// Input mesh.
-    pub mesh_id: String,
-    /// Reference mesh, for kinds that use one.
-    pub reference_mesh_id: Option<String>,
-    /// Validated parameters.
-    pub params: serde_json::Map<String, serde_json::Value>,
-    /// Webhook target.
-    pub callback_url: Option<String>,
-    /// Lifecycle state.
-    pub status: Status,
-    /// Last progress report (JSON object), persisted on state changes.
-    pub progress: Option<serde_json::Value>,
-    /// Why the job failed.
-    pub error: Option<Problem>,
-    /// Milliseconds since the Unix epoch.
-    pub created_at: i64,
-    /// When a worker last started it.
-    pub started_at: Option<i64>,
-    /// When it ended.
-    pub finished_at: Option<i64>,
-    /// When its results are deleted.
-    pub expires_at: Option<i64>,
-    /// How many times a worker started it (restarts re-queue running jobs).
-    pub attempts: u32,
-    /// Names of the stored artifacts (`report.json`, `mesh.glb`, …), blobs `jobs/{id}/{name}`.
-    pub artifacts: Vec<String>,
-    /// What a succeeded job reached, shown at the top level of the job: `converged`,
-    /// `max_flattenability` (measured on the output), `stop_reason`.
-    pub outcome: Option<serde_json::Value>,
-    /// Client's `Idempotency-Key`.
-    pub idempotency_key: Option<String>,
-    /// Hash of the request that created the job (to detect a reused key).
-    pub request_hash: Option<String>,
-}
-
-impl JobRecord {
-    /// A queued job of `kind` on mesh `mesh_id` with no parameters, callback or history.
-    pub fn queued(id: &str, kind: &str, mesh_id: &str, created_at: i64) -> JobRecord {
-        JobRecord {
-            seq: 0,
-            id: id.into(),
-            kind: kind.into(),
-            mesh_id: mesh_id.into(),
-            reference_mesh_id: None,
-            params: serde_json::Map::new(),
-            callback_url: None,
-            status: Status::Queued,
-            progress: None,
-            error: None,
-            created_at,
-            started_at: None,
-            finished_at: None,
-            expires_at: None,
-            attempts: 0,
-            artifacts: vec![],
-            outcome: None,
-            idempotency_key: None,
-            request_hash: None,
-        }
-    }
-}
-
-/// Filters and page of `GET /v1/jobs`.
-#[derive(Debug, Clone, Default)]
-pub struct JobFilter {
-    /// Only jobs in this state.
-    pub status: Option<Status>,
-    /// Only jobs of this kind.
-    pub kind: Option<String>,
-    /// Only jobs inserted before this sequence number (the page token).
-    pub before_seq: Option<i64>,
-    /// Page size.
-    pub limit: usize,
-}
-
-/// Result of an insert that may hit an existing idempotency key.
-#[derive(Debug)]
-pub enum Inserted {
-    /// A new job.
-    New(JobRecord),
-    /// The job created earlier with the same idempotency key.
-    Existing(JobRecord),
-}
-
-/// The durable state of the service. Implementations are shared between the async handlers
-/// and the worker threads, so every method is a short blocking call.
-pub trait Store: Send + Sync {
-    /// Cheap liveness check of the backend.
-    fn ping(&self) -> Result<(), StoreError>;
-    /// Record an uploaded mesh (its blob is written first).
-    fn insert_mesh(&self, m: &MeshRecord) -> Result<(), StoreError>;
-    /// A mesh by id.
-    fn get_mesh(&self, id: &str) -> Result<Option<MeshRecord>, StoreError>;
-    /// Forget a mesh; false when absent.
-    fn delete_mesh(&self, id: &str) -> Result<bool, StoreError>;
-    /// Whether a queued or running job uses the mesh.
-    fn mesh_in_use(&self, id: &str) -> Result<bool, StoreError>;
-    /// Insert a job, or return the one with the same idempotency key. `seq` is assigned.
-    fn insert_job(&self, j: &JobRecord) -> Result<Inserted, StoreError>;
-    /// The job created with an idempotency key.
-    fn find_idempotent(&self, key: &str) -> Result<Option<JobRecord>, StoreError>;
-    /// A job by id.
-    fn get_job(&self, id: &str) -> Result<Option<JobRecord>, StoreError>;
-    /// `get_job` when it can be answered without waiting (no lock to wait for, no network):
-    /// None means "ask `get_job` from a blocking thread". Lets the async status poll skip a
-    /// thread hand-off.
-    fn try_get_job_now(&self, _id: &str) -> Option<Result<Option<JobRecord>, StoreError>> {
-        None
-    }
-    /// Overwrite a job's mutable fields.
-    fn update_job(&self, j: &JobRecord) -> Result<(), StoreError>;
-    /// Delete a job row; false when absent.
-    fn delete_job(&self, id: &str) -> Result<bool, StoreError>;
-    /// Jobs newest first, filtered.
-    fn list_jobs(&self, f: &JobFilter) -> Result<Vec<JobRecord>, StoreError>;
-    /// Jobs in a state, oldest first (recovery after a restart).
-    fn jobs_with_status(&self, s: Status) -> Result<Vec<JobRecord>, StoreError>;
-    /// Finished jobs whose results expired before `now`.
-    fn expired_jobs(&self, now: i64) -> Result<Vec<JobRecord>, StoreError>;
-    /// Store a blob atomically (write, then rename).
-    fn put_blob(&self, key: &str, bytes: &[u8]) -> Result<(), StoreError>;
-    /// Read a blob; None when absent.
-    fn get_blob(&self, key: &str) -> Result<Option<Vec<u8>>, StoreError>;
-    /// Delete a blob or a directory of blobs; absent is fine.
-    fn delete_blobs(&self, prefix: &str) -> Result<(), StoreError>;
-    /// Periodic housekeeping off the request path (called about once a second).
-    fn maintain(&self) -> Result<(), StoreError> {
-        Ok(())
-    }
-
-    // Coordination: every process serving one store runs jobs through these, so that a job
-    // runs once whichever process took it, a cancel reaches the process running it, and a
-    // job whose process died runs again. Each is one atomic step of the backend.
-
-    /// Take the oldest queued job for `worker`, leased until `now + lease_ms`: it becomes
-    /// running, its attempts grow by one, its progress and outcome are cleared.
-    fn claim(&self, worker: &str, now: i64, lease_ms: i64)
-        -> Result<Option<JobRecord>, StoreError>;
-    /// Extend `worker`'s lease on job `id` (and record `progress` when given); says whether a
-    /// cancel was requested, or that the lease is lost (expired and taken, or the job ended
-    /// or was deleted), in which case the worker must stop and not write its result.
-    fn heartbeat(
-        &self,
-        worker: &str,
-        id: &str,
-        now: i64,
-        lease_ms: i64,
-        progress: Option<&serde_json::Value>,
-    ) -> Result<Lease, StoreError>;
-    /// Record the end of a job `worker` holds (status, error, artifacts, outcome, times from
-    /// `j`); false, and nothing written, when it no longer holds it.
-    fn finish(&self, worker: &str, j: &JobRecord) -> Result<bool, StoreError>;
-    /// Cancel job `id`: a queued job ends cancelled at once (results kept until
-    /// `expires_at`), a running one is flagged for its worker's next heartbeat.
-    fn request_cancel(
-        &self,
-        id: &str,
-        now: i64,
-        expires_at: i64,
-    ) -> Result<CancelOutcome, StoreError>;
-    /// Running jobs whose lease ran out before `now`: queued again (or cancelled, when a
-    /// cancel was requested), and returned.
-    fn requeue_expired(&self, now: i64, expires_at: i64) -> Result<Vec<JobRecord>, StoreError>;
-    /// How many jobs are in state `s`.
-    fn count_with_status(&self, s: Status) -> Result<usize, StoreError>;
-}
-
-/// What a heartbeat learns.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Lease {
-    /// The worker still holds the job.
-    Held {
-        /// Someone asked to cancel it.
-        cancel_requested: bool,
-    },
-    /// The worker no longer holds it.
-    Lost,
-}
-
-/// What a cancel request did.
-#[derive(Debug, Clone, PartialEq)]
-pub enum CancelOutcome {
-    /// No such job.
-    NotFound,
-    /// It was queued and is now cancelled.
-    Cancelled(JobRecord),
-    /// It is running; its worker will stop at its next heartbeat.
-    Requested(JobRecord),
-    /// It had already ended.
-    Ended(JobRecord),
 }
 
 /// SQLite index (`flatmesh.sqlite3`, WAL) plus blob files under the data directory.
@@ -294,7 +26,7 @@ pub struct SqliteStore {
     /// Runs WAL checkpoints, so that commits on the request path never do.
     checkpointer: Mutex<Connection>,
     next_reader: std::sync::atomic::AtomicUsize,
-    dir: PathBuf,
+    blobs: FileBlobs,
 }
 
 const READERS: usize = 4;
@@ -414,8 +146,7 @@ fn add_columns(conn: &Connection) -> rusqlite::Result<()> {
 impl SqliteStore {
     /// Open (creating) the store in `dir`.
     pub fn open(dir: &Path) -> Result<SqliteStore, StoreError> {
-        std::fs::create_dir_all(dir.join("blobs"))
-            .map_err(|e| StoreError::Io(dir.display().to_string(), e))?;
+        std::fs::create_dir_all(dir).map_err(|e| StoreError::Io(dir.display().to_string(), e))?;
         let conn = Connection::open(dir.join("flatmesh.sqlite3"))?;
         // WAL + NORMAL: a committed transaction survives a process crash (not necessarily a
         // power cut, which would need synchronous=FULL at a cost on every status change).
@@ -444,7 +175,7 @@ impl SqliteStore {
             readers,
             checkpointer: Mutex::new(checkpointer),
             next_reader: std::sync::atomic::AtomicUsize::new(0),
-            dir: dir.to_path_buf(),
+            blobs: FileBlobs::new(dir.join("blobs")),
         })
     }
 
@@ -468,24 +199,8 @@ impl SqliteStore {
 
     /// Every read connection, locked (tests of what happens when none is free).
     #[cfg(test)]
-    pub(crate) fn hold_readers_for_test(&self) -> Vec<std::sync::MutexGuard<'_, Connection>> {
+    fn hold_readers_for_test(&self) -> Vec<std::sync::MutexGuard<'_, Connection>> {
         self.readers.iter().map(|r| r.lock().unwrap()).collect()
-    }
-
-    fn blob_path(&self, key: &str) -> PathBuf {
-        // Keys are built by the service from generated ids; refuse anything that could escape.
-        let clean: String = key
-            .chars()
-            .map(|c| {
-                if c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.' | '/') {
-                    c
-                } else {
-                    '_'
-                }
-            })
-            .collect::<String>()
-            .replace("..", "__");
-        self.dir.join("blobs").join(clean)
     }
 
     fn select_jobs(
@@ -684,45 +399,11 @@ impl Store for SqliteStore {
         )
     }
 
-    fn put_blob(&self, key: &str, bytes: &[u8]) -> Result<(), StoreError> {
-        let path = self.blob_path(key);
-        let io = |e| StoreError::Io(key.to_string(), e);
-        if let Some(parent) = path.parent() {
-            std::fs::create_dir_all(parent).map_err(io)?;
-        }
-        let tmp = path.with_extension(format!("tmp{}", std::process::id()));
-        std::fs::write(&tmp, bytes).map_err(io)?;
-        std::fs::rename(&tmp, &path).map_err(io)?;
-        Ok(())
-    }
-
-    fn get_blob(&self, key: &str) -> Result<Option<Vec<u8>>, StoreError> {
-        match std::fs::read(self.blob_path(key)) {
-            Ok(b) => Ok(Some(b)),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
-            Err(e) => Err(StoreError::Io(key.to_string(), e)),
-        }
-    }
-
     fn maintain(&self) -> Result<(), StoreError> {
         // PASSIVE: copies what it can without blocking readers or the writer.
         let c = self.checkpointer.lock().unwrap_or_else(|e| e.into_inner());
         c.query_row("PRAGMA wal_checkpoint(PASSIVE)", [], |_| Ok(()))?;
         Ok(())
-    }
-
-    fn delete_blobs(&self, prefix: &str) -> Result<(), StoreError> {
-        let path = self.blob_path(prefix);
-        let r = if path.is_dir() {
-            std::fs::remove_dir_all(&path)
-        } else {
-            std::fs::remove_file(&path)
-        };
-        match r {
-            Ok(()) => Ok(()),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
-            Err(e) => Err(StoreError::Io(prefix.to_string(), e)),
-        }
     }
 
     // Each of these is one statement (or one IMMEDIATE transaction), so it is atomic across
@@ -851,5 +532,76 @@ impl Store for SqliteStore {
             |r| r.get(0),
         )?;
         Ok(n as usize)
+    }
+}
+
+impl Blobs for SqliteStore {
+    fn put_blob(&self, key: &str, bytes: &[u8]) -> Result<(), StoreError> {
+        self.blobs.put_blob(key, bytes)
+    }
+    fn get_blob(&self, key: &str) -> Result<Option<Vec<u8>>, StoreError> {
+        self.blobs.get_blob(key)
+    }
+    fn delete_blobs(&self, prefix: &str) -> Result<(), StoreError> {
+        self.blobs.delete_blobs(prefix)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A store written before jobs had an outcome opens, keeps its jobs, and records outcomes.
+    #[test]
+    fn store_without_outcome_column_is_upgraded() {
+        let dir = std::env::temp_dir().join(format!("flatmesh-old-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        {
+            let store = SqliteStore::open(&dir).unwrap();
+            store
+                .insert_job(&JobRecord::queued("j_old", "report", "m1", 0))
+                .unwrap();
+        }
+        {
+            let c = rusqlite::Connection::open(dir.join("flatmesh.sqlite3")).unwrap();
+            c.execute_batch("ALTER TABLE jobs DROP COLUMN outcome")
+                .unwrap();
+        }
+        let store = SqliteStore::open(&dir).unwrap();
+        let mut j = store.get_job("j_old").unwrap().unwrap();
+        assert_eq!(j.outcome, None);
+        j.outcome = Some(serde_json::json!({"converged": true}));
+        store.update_job(&j).unwrap();
+        assert_eq!(store.get_job("j_old").unwrap().unwrap().outcome, j.outcome);
+        drop(store);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// The non-blocking read agrees with `get_job`, and declines (None) rather than waits
+    /// when every reader is held.
+    #[test]
+    fn try_get_job_now_matches_get_job_and_never_waits() {
+        let dir = std::env::temp_dir().join(format!("flatmesh-trynow-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let store = SqliteStore::open(&dir).unwrap();
+        store
+            .insert_job(&JobRecord::queued("j1", "report", "m1", 0))
+            .unwrap();
+        let mut j = store.get_job("j1").unwrap().unwrap();
+        j.status = Status::Running;
+        j.progress = Some(serde_json::json!({"stage": "newton", "iteration": 3}));
+        store.update_job(&j).unwrap();
+        let now = store
+            .try_get_job_now("j1")
+            .expect("a reader is free")
+            .unwrap();
+        assert_eq!(now, store.get_job("j1").unwrap());
+        assert_eq!(now.unwrap().status, Status::Running);
+        assert_eq!(store.try_get_job_now("nope").unwrap().unwrap(), None);
+        let held = store.hold_readers_for_test();
+        assert!(store.try_get_job_now("j1").is_none());
+        drop(held);
+        assert!(store.try_get_job_now("j1").is_some());
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

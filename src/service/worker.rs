@@ -4,27 +4,19 @@
 //! [`Control`] (cancels requested through any process arrive with the heartbeat), and panics
 //! caught and turned into a failed job.
 
+use super::domain::{now_ms, ErrorCode, JobError, JobRecord, Status};
 use super::metrics::Metrics;
-use super::problem::Problem;
-use super::store::{CancelOutcome, JobRecord, Lease, Status, Store, StoreError};
+use super::store::{CancelOutcome, Lease, Store, StoreError};
+use super::views::rfc3339;
 use super::webhook::Webhooks;
 use crate::algorithms::{AlgoError, Control, Progress};
 use crate::io;
 use crate::jobs::{artifacts, Input, JobOutcome, JobSpec};
-use axum::http::StatusCode;
 use std::collections::HashMap;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
-
-/// Milliseconds since the Unix epoch.
-pub fn now_ms() -> i64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_millis() as i64)
-        .unwrap_or(0)
-}
 
 /// Executor limits.
 #[derive(Debug, Clone)]
@@ -102,7 +94,7 @@ impl Control for JobControl<'_> {
             "iteration": p.iteration,
             "max_flattenability": p.max_flattenability.filter(|x| x.is_finite()),
             "step_norm": p.step_norm.filter(|x| x.is_finite()),
-            "updated_at": super::api::rfc3339(now_ms()),
+            "updated_at": rfc3339(now_ms()),
         });
         *self.live.progress.lock().unwrap_or_else(|e| e.into_inner()) = Some(v);
         self.live.progress_dirty.store(true, Ordering::Relaxed);
@@ -215,13 +207,6 @@ impl Executor {
         self.queued() < self.limits.max_queued
     }
 
-    /// Room for one more queued job (the queue is the store's, shared by every process).
-    pub fn reserve(&self) -> bool {
-        self.has_room()
-    }
-    /// Undo [`Executor::reserve`] (nothing to undo: the queue is counted in the store).
-    pub fn release(&self) {}
-
     /// The in-memory state of a job running in this process.
     pub fn live(&self, id: &str) -> Option<Arc<Live>> {
         self.live
@@ -232,7 +217,7 @@ impl Executor {
     }
 
     /// A job was queued: wake an idle claim loop (other processes find it by polling).
-    pub fn enqueue(&self, _id: String, _reserved: bool) {
+    pub fn enqueued(&self) {
         self.metrics.set_queued(self.queued());
         self.wake_workers();
     }
@@ -388,9 +373,8 @@ impl Executor {
             job.status = Status::Failed;
             job.finished_at = Some(now_ms());
             job.expires_at = Some(now_ms() + self.retention_ms());
-            job.error = Some(Problem::new(
-                StatusCode::INTERNAL_SERVER_ERROR,
-                "interrupted",
+            job.error = Some(JobError::new(
+                ErrorCode::Interrupted,
                 format!(
                     "the job was interrupted {} times (its process stopped while running it; \
                      limit {})",
@@ -478,7 +462,7 @@ impl Executor {
         >,
     ) -> (
         Status,
-        Option<Problem>,
+        Option<JobError>,
         Vec<String>,
         Option<serde_json::Value>,
     ) {
@@ -486,9 +470,8 @@ impl Executor {
             Ok(Ok((artifacts, outcome))) => (Status::Succeeded, None, artifacts, Some(outcome)),
             Ok(Err(ExecError::Algo(AlgoError::Cancelled))) => {
                 if control.timed_out.load(Ordering::Relaxed) {
-                    let p = Problem::new(
-                        StatusCode::UNPROCESSABLE_ENTITY,
-                        "time-limit",
+                    let p = JobError::new(
+                        ErrorCode::TimeLimit,
                         format!(
                             "the job exceeded its time limit of {} s",
                             self.limits.time_limit.as_secs_f64()
@@ -508,18 +491,14 @@ impl Executor {
                 };
                 (
                     Status::Failed,
-                    Some(Problem::invalid(&field, e.to_string())),
+                    Some(JobError::invalid(&field, e.to_string())),
                     vec![],
                     None,
                 )
             }
             Ok(Err(ExecError::Algo(e))) => (
                 Status::Failed,
-                Some(Problem::new(
-                    StatusCode::UNPROCESSABLE_ENTITY,
-                    "algorithm-failed",
-                    e.to_string(),
-                )),
+                Some(JobError::new(ErrorCode::AlgorithmFailed, e.to_string())),
                 vec![],
                 None,
             ),
@@ -529,10 +508,10 @@ impl Executor {
                 tracing::error!(job = %job.id, panic = %msg, "job panicked");
                 (
                     Status::Failed,
-                    Some(Problem::internal(format!(
-                        "the {} algorithm failed unexpectedly: {msg}",
-                        job.kind
-                    ))),
+                    Some(JobError::new(
+                        ErrorCode::Internal,
+                        format!("the {} algorithm failed unexpectedly: {msg}", job.kind),
+                    )),
                     vec![],
                     None,
                 )
@@ -548,7 +527,7 @@ impl Executor {
         control: &JobControl<'_>,
     ) -> Result<(Vec<String>, serde_json::Value), ExecError> {
         let spec = JobSpec::parse(&job.kind, &job.params)
-            .map_err(|e| ExecError::Input(Problem::invalid("params", e.to_string())))?;
+            .map_err(|e| ExecError::Input(JobError::invalid("params", e.to_string())))?;
         let (mesh, warnings) = self.load_mesh(&job.mesh_id, "mesh_id")?;
         let reference = match &job.reference_mesh_id {
             Some(r) => Some(self.load_mesh(r, "reference_mesh_id")?.0),
@@ -563,7 +542,7 @@ impl Executor {
         for a in &rendered.artifacts {
             self.store
                 .put_blob(&format!("jobs/{}/{}", job.id, a.name), &a.bytes)
-                .map_err(|e| ExecError::Input(e.into()))?;
+                .map_err(ExecError::storage)?;
             names.push(a.name.to_string());
         }
         let reached = serde_json::json!({
@@ -582,19 +561,19 @@ impl Executor {
         let rec = self
             .store
             .get_mesh(id)
-            .map_err(|e| ExecError::Input(e.into()))?
+            .map_err(ExecError::storage)?
             .ok_or_else(|| {
-                ExecError::Input(Problem::invalid(field, format!("mesh `{id}` was deleted")))
+                ExecError::Input(JobError::invalid(field, format!("mesh `{id}` was deleted")))
             })?;
         let bytes = self
             .store
             .get_blob(&format!("meshes/{id}"))
-            .map_err(|e| ExecError::Input(e.into()))?
-            .ok_or_else(|| ExecError::Input(Problem::internal(format!("mesh `{id}` lost"))))?;
+            .map_err(ExecError::storage)?
+            .ok_or_else(|| ExecError::internal(format!("mesh `{id}` lost")))?;
         let format = io::Format::from_extension(&rec.format)
-            .ok_or_else(|| ExecError::Input(Problem::internal("stored format unknown")))?;
+            .ok_or_else(|| ExecError::internal("stored format unknown".into()))?;
         io::load(&bytes, format)
-            .map_err(|e| ExecError::Input(Problem::invalid(field, format!("mesh `{id}`: {e}"))))
+            .map_err(|e| ExecError::Input(JobError::invalid(field, format!("mesh `{id}`: {e}"))))
     }
 
     /// Delete expired results (called periodically).
@@ -620,12 +599,23 @@ impl Executor {
 
 enum ExecError {
     Algo(AlgoError),
-    Input(Problem),
+    Input(JobError),
+}
+
+impl ExecError {
+    fn internal(detail: String) -> ExecError {
+        ExecError::Input(JobError::new(ErrorCode::Internal, detail))
+    }
+    fn storage(e: StoreError) -> ExecError {
+        tracing::error!(error = %e, "store error while running a job");
+        ExecError::internal(format!("storage error: {e}"))
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::service::domain::MeshRecord;
     use crate::service::store::{SqliteStore, Store};
 
     /// Runs jobs as the service does, except that every `fl-mesh` job panics.
@@ -660,30 +650,6 @@ mod tests {
         }
     }
 
-    /// A store written before jobs had an outcome opens, keeps its jobs, and records outcomes.
-    #[test]
-    fn store_without_outcome_column_is_upgraded() {
-        let dir = std::env::temp_dir().join(format!("flatmesh-old-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        {
-            let store = SqliteStore::open(&dir).unwrap();
-            store.insert_job(&job("j_old", "m1", false)).unwrap();
-        }
-        {
-            let c = rusqlite::Connection::open(dir.join("flatmesh.sqlite3")).unwrap();
-            c.execute_batch("ALTER TABLE jobs DROP COLUMN outcome")
-                .unwrap();
-        }
-        let store = SqliteStore::open(&dir).unwrap();
-        let mut j = store.get_job("j_old").unwrap().unwrap();
-        assert_eq!(j.outcome, None);
-        j.outcome = Some(serde_json::json!({"converged": true}));
-        store.update_job(&j).unwrap();
-        assert_eq!(store.get_job("j_old").unwrap().unwrap().outcome, j.outcome);
-        drop(store);
-        let _ = std::fs::remove_dir_all(&dir);
-    }
-
     /// A panic inside an algorithm fails that job with a 500 problem; the pool keeps working.
     #[test]
     fn panic_fails_the_job_and_the_pool_survives() {
@@ -713,7 +679,7 @@ mod tests {
         let obj = std::fs::read("fixtures/flat_disk.obj").unwrap();
         store.put_blob("meshes/m1", &obj).unwrap();
         store
-            .insert_mesh(&crate::service::store::MeshRecord {
+            .insert_mesh(&MeshRecord {
                 id: "m1".into(),
                 created_at: 0,
                 format: "obj".into(),
@@ -724,13 +690,13 @@ mod tests {
             .unwrap();
         for (id, boom) in [("j1", true), ("j2", false)] {
             store.insert_job(&job(id, "m1", boom)).unwrap();
-            assert!(exec.reserve());
-            exec.enqueue(id.into(), true);
+            assert!(exec.has_room());
+            exec.enqueued();
         }
         let j1 = wait_end(store.as_ref(), "j1");
         assert_eq!(j1.status, Status::Failed);
         let e = j1.error.unwrap();
-        assert_eq!(e.status, 500);
+        assert_eq!(e.code, ErrorCode::Internal);
         assert!(e.detail.contains("index out of bounds"), "{}", e.detail);
         assert!(j1.artifacts.is_empty());
         let j2 = wait_end(store.as_ref(), "j2");
@@ -738,32 +704,6 @@ mod tests {
         assert!(j2.artifacts.iter().any(|a| a == "report.json"));
         assert_eq!(exec.running(), 0);
         assert_eq!(exec.queued(), 0);
-        let _ = std::fs::remove_dir_all(&dir);
-    }
-
-    /// The non-blocking read agrees with `get_job`, and declines (None) rather than waits
-    /// when every reader is held.
-    #[test]
-    fn try_get_job_now_matches_get_job_and_never_waits() {
-        let dir = std::env::temp_dir().join(format!("flatmesh-trynow-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        let store = SqliteStore::open(&dir).unwrap();
-        store.insert_job(&job("j1", "m1", false)).unwrap();
-        let mut j = store.get_job("j1").unwrap().unwrap();
-        j.status = Status::Running;
-        j.progress = Some(serde_json::json!({"stage": "newton", "iteration": 3}));
-        store.update_job(&j).unwrap();
-        let now = store
-            .try_get_job_now("j1")
-            .expect("a reader is free")
-            .unwrap();
-        assert_eq!(now, store.get_job("j1").unwrap());
-        assert_eq!(now.unwrap().status, Status::Running);
-        assert_eq!(store.try_get_job_now("nope").unwrap().unwrap(), None);
-        let held = store.hold_readers_for_test();
-        assert!(store.try_get_job_now("j1").is_none());
-        drop(held);
-        assert!(store.try_get_job_now("j1").is_some());
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

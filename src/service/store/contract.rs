@@ -3,7 +3,8 @@
 //! PostgreSQL one will run the same). `open` gives a second handle on the same store, as a
 //! second process would have, so that "exactly once" is checked across handles.
 
-use super::store::{CancelOutcome, JobRecord, Lease, Status, Store};
+use super::{CancelOutcome, Lease, Store};
+use crate::service::domain::{JobRecord, Status};
 use std::collections::HashSet;
 use std::sync::Arc;
 

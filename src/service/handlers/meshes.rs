@@ -1,0 +1,106 @@
+//! `/v1/meshes`: upload, read, report, delete.
+
+use super::{
+    blocking, format_of, get_mesh_rec, hv, media_type, mesh_part, multipart_err, store_mesh,
+};
+use super::{ApiResult, MESH_TYPES};
+use crate::io;
+use crate::service::problem::Problem;
+use crate::service::state::AppState;
+use crate::service::views::mesh_json;
+use axum::extract::{Multipart, Path, State};
+use axum::http::{header, HeaderMap, StatusCode};
+use axum::response::IntoResponse;
+use axum::Json;
+
+/// `POST /v1/meshes`.
+pub async fn upload_mesh(
+    State(st): State<AppState>,
+    headers: HeaderMap,
+    request: axum::extract::Request,
+) -> ApiResult {
+    let media = media_type(&headers).unwrap_or_default();
+    let rec = if media == "multipart/form-data" {
+        let mut mp = <Multipart as axum::extract::FromRequest<()>>::from_request(request, &())
+            .await
+            .map_err(|e| Problem::bad_request(e.body_text()))?;
+        let mut rec = None;
+        while let Some(field) = mp.next_field().await.map_err(multipart_err)? {
+            if field.name() == Some("mesh") && rec.is_none() {
+                let (bytes, format) = mesh_part(field, "mesh").await?;
+                rec = Some(store_mesh(&st, bytes, format, "mesh").await?);
+            }
+        }
+        rec.ok_or_else(|| Problem::invalid("mesh", "the multipart body has no `mesh` part"))?
+    } else {
+        let bytes = axum::body::to_bytes(request.into_body(), st.max_upload)
+            .await
+            .map_err(|_| {
+                Problem::new(
+                    StatusCode::PAYLOAD_TOO_LARGE,
+                    "payload-too-large",
+                    format!("the body exceeds {} bytes", st.max_upload),
+                )
+            })?;
+        let format = format_of(&media, None, &bytes).ok_or_else(|| {
+            Problem::unsupported_media(format!(
+                "media type `{media}` is not a mesh format (expected {MESH_TYPES})"
+            ))
+        })?;
+        store_mesh(&st, bytes, format, "body").await?
+    };
+    let mut res = (StatusCode::CREATED, Json(mesh_json(&rec))).into_response();
+    let h = res.headers_mut();
+    h.insert(header::LOCATION, hv(&format!("/v1/meshes/{}", rec.id)));
+    h.insert(header::ETAG, hv(&format!("\"{}\"", rec.sha256)));
+    Ok(res)
+}
+
+/// `GET /v1/meshes/{id}`.
+pub async fn get_mesh(State(st): State<AppState>, Path(id): Path<String>) -> ApiResult {
+    let rec = get_mesh_rec(&st, &id).await?;
+    let mut res = Json(mesh_json(&rec)).into_response();
+    res.headers_mut()
+        .insert(header::ETAG, hv(&format!("\"{}\"", rec.sha256)));
+    Ok(res)
+}
+
+/// `GET /v1/meshes/{id}/report`: the flattenability report, computed now.
+pub async fn mesh_report(State(st): State<AppState>, Path(id): Path<String>) -> ApiResult {
+    let rec = get_mesh_rec(&st, &id).await?;
+    let store = st.store.clone();
+    let body = blocking(move || {
+        let bytes = store
+            .get_blob(&format!("meshes/{}", rec.id))?
+            .ok_or_else(|| Problem::internal("mesh bytes lost"))?;
+        let format = io::Format::from_extension(&rec.format)
+            .ok_or_else(|| Problem::internal("stored format unknown"))?;
+        let (mesh, warnings) =
+            io::load(&bytes, format).map_err(|e| Problem::internal(e.to_string()))?;
+        let report = crate::report::Report::compute(&mesh, &warnings);
+        serde_json::to_vec(&report).map_err(|e| Problem::internal(e.to_string()))
+    })
+    .await?;
+    Ok(([(header::CONTENT_TYPE, "application/json")], body).into_response())
+}
+
+/// `DELETE /v1/meshes/{id}`: 409 while a queued or running job uses it.
+pub async fn delete_mesh(State(st): State<AppState>, Path(id): Path<String>) -> ApiResult {
+    let store = st.store.clone();
+    let id2 = id.clone();
+    blocking(move || {
+        if store.get_mesh(&id2)?.is_none() {
+            return Err(Problem::not_found("mesh", &id2));
+        }
+        if store.mesh_in_use(&id2)? {
+            return Err(Problem::conflict(format!(
+                "mesh `{id2}` is used by a queued or running job"
+            )));
+        }
+        store.delete_mesh(&id2)?;
+        store.delete_blobs(&format!("meshes/{id2}"))?;
+        Ok(())
+    })
+    .await?;
+    Ok(StatusCode::NO_CONTENT.into_response())
+}

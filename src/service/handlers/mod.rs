@@ -1,0 +1,163 @@
+//! HTTP handlers, one module per resource. Every error is a [`Problem`]; CPU work (parsing
+//! meshes, reports) runs on blocking threads, jobs on the executor's pool.
+
+pub mod jobs;
+pub mod meshes;
+pub mod ops;
+
+use super::domain::{now_ms, MeshRecord};
+use super::problem::{self, Problem};
+use super::state::AppState;
+use crate::io;
+use axum::body::Bytes;
+use axum::http::{header, HeaderMap, HeaderValue};
+use axum::response::Response;
+use serde_json::json;
+use sha2::{Digest, Sha256};
+
+type ApiResult = Result<Response, Problem>;
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+fn sha256_hex(bytes: &[u8]) -> String {
+    hex(&Sha256::digest(bytes))
+}
+
+fn new_id(prefix: &str) -> String {
+    format!("{prefix}_{}", uuid::Uuid::new_v4().simple())
+}
+
+fn media_type(headers: &HeaderMap) -> Option<String> {
+    headers
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .map(|s| {
+            s.split(';')
+                .next()
+                .unwrap_or("")
+                .trim()
+                .to_ascii_lowercase()
+        })
+}
+
+/// The mesh format of a media type, or of the bytes for `application/octet-stream`.
+fn format_of(media: &str, filename: Option<&str>, bytes: &[u8]) -> Option<io::Format> {
+    match media {
+        "model/gltf-binary" => Some(io::Format::Glb),
+        "model/gltf+json" => Some(io::Format::Gltf),
+        "model/obj" => Some(io::Format::Obj),
+        "model/off" => Some(io::Format::Off),
+        "" | "application/octet-stream" | "text/plain" => filename
+            .and_then(|f| f.rsplit_once('.'))
+            .and_then(|(_, ext)| io::Format::from_extension(ext))
+            .or_else(|| io::Format::sniff(bytes)),
+        _ => None,
+    }
+}
+
+const MESH_TYPES: &str = "model/gltf-binary, model/gltf+json, model/obj or multipart/form-data";
+
+/// Parse, validate and store a mesh; `field` names it in errors.
+async fn store_mesh(
+    st: &AppState,
+    bytes: Bytes,
+    format: io::Format,
+    field: &str,
+) -> Result<MeshRecord, Problem> {
+    let field_owned = field.to_string();
+    let parsed = tokio::task::spawn_blocking(move || {
+        let r = io::load(&bytes, format).map(|(mesh, warnings)| {
+            let report = crate::report::Report::compute(&mesh, &warnings);
+            json!({
+                "vertices": report.vertices,
+                "faces": report.faces,
+                "patches": report.patches.iter().map(|p| p.name.clone()).collect::<Vec<_>>(),
+                "interior_vertices": report.interior_vertices,
+                "max_flattenability": report.max_flattenability,
+                "developable": report.max_flattenability <= report.developable_tolerance,
+                "warnings": warnings,
+            })
+        });
+        (bytes, r)
+    })
+    .await
+    .map_err(|e| Problem::internal(format!("mesh parser crashed: {e}")))?;
+    let (bytes, summary) = parsed;
+    let summary = summary.map_err(|e| {
+        Problem::invalid(
+            &field_owned,
+            format!("invalid {} mesh: {e}", format.extension()),
+        )
+    })?;
+    let rec = MeshRecord {
+        id: new_id("m"),
+        created_at: now_ms(),
+        format: format.extension().to_string(),
+        size: bytes.len() as u64,
+        sha256: sha256_hex(&bytes),
+        summary,
+    };
+    let store = st.store.clone();
+    let r2 = rec.clone();
+    tokio::task::spawn_blocking(move || {
+        store.put_blob(&format!("meshes/{}", r2.id), &bytes)?;
+        store.insert_mesh(&r2)
+    })
+    .await
+    .map_err(|e| Problem::internal(e.to_string()))??;
+    st.metrics.uploaded();
+    Ok(rec)
+}
+
+fn multipart_err(e: axum::extract::multipart::MultipartError) -> Problem {
+    let status = e.status();
+    Problem::new(status, problem::slug_for(status), e.body_text())
+}
+
+/// A file part of a multipart body: its bytes and mesh format.
+async fn mesh_part(
+    field: axum::extract::multipart::Field<'_>,
+    name: &str,
+) -> Result<(Bytes, io::Format), Problem> {
+    let media = field
+        .content_type()
+        .map(|s| {
+            s.split(';')
+                .next()
+                .unwrap_or("")
+                .trim()
+                .to_ascii_lowercase()
+        })
+        .unwrap_or_default();
+    let filename = field.file_name().map(str::to_string);
+    let bytes = field.bytes().await.map_err(multipart_err)?;
+    let format = format_of(&media, filename.as_deref(), &bytes).ok_or_else(|| {
+        Problem::unsupported_media(format!(
+            "part `{name}`: media type `{media}` is not a mesh format (expected {MESH_TYPES})"
+        ))
+    })?;
+    Ok((bytes, format))
+}
+
+fn hv(s: &str) -> HeaderValue {
+    HeaderValue::from_str(s).unwrap_or(HeaderValue::from_static(""))
+}
+
+async fn blocking<T: Send + 'static>(
+    f: impl FnOnce() -> Result<T, Problem> + Send + 'static,
+) -> Result<T, Problem> {
+    tokio::task::spawn_blocking(f)
+        .await
+        .map_err(|e| Problem::internal(format!("worker crashed: {e}")))?
+}
+
+/// A mesh record by id (404 when absent).
+async fn get_mesh_rec(st: &AppState, id: &str) -> Result<MeshRecord, Problem> {
+    let store = st.store.clone();
+    let id2 = id.to_string();
+    blocking(move || Ok(store.get_mesh(&id2)?))
+        .await?
+        .ok_or_else(|| Problem::not_found("mesh", id))
+}

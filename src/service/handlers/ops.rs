@@ -1,0 +1,70 @@
+//! Operational routes: health, readiness, metrics, version, the API description.
+
+use super::{blocking, ApiResult};
+use crate::jobs::Kind;
+use crate::service::problem::Problem;
+use crate::service::state::AppState;
+use axum::extract::State;
+use axum::http::{header, StatusCode};
+use axum::response::{IntoResponse, Response};
+use axum::Json;
+use serde_json::json;
+
+/// The OpenAPI 3.1 description, as written.
+pub const OPENAPI: &str = include_str!("../openapi.yaml");
+
+/// `GET /healthz`: the process answers.
+pub async fn healthz() -> Response {
+    Json(json!({"status": "ok"})).into_response()
+}
+
+/// `GET /readyz`: the store answers and the queue has room (503 otherwise).
+pub async fn readyz(State(st): State<AppState>) -> ApiResult {
+    let store = st.store.clone();
+    blocking(move || {
+        store.ping().map_err(|e| {
+            Problem::new(
+                StatusCode::SERVICE_UNAVAILABLE,
+                "unavailable",
+                format!("store: {e}"),
+            )
+        })
+    })
+    .await?;
+    if !st.exec.has_room() {
+        return Err(Problem::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "unavailable",
+            "the job queue is full",
+        )
+        .retry_after(st.retry_after_secs()));
+    }
+    Ok(
+        Json(json!({"status": "ready", "queued": st.exec.queued(), "running": st.exec.running()}))
+            .into_response(),
+    )
+}
+
+/// `GET /metrics`.
+pub async fn metrics(State(st): State<AppState>) -> Response {
+    (
+        [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
+        st.metrics.render(),
+    )
+        .into_response()
+}
+
+/// `GET /version`.
+pub async fn version() -> Response {
+    Json(json!({
+        "name": "flatmesh",
+        "version": env!("CARGO_PKG_VERSION"),
+        "kinds": Kind::names(),
+    }))
+    .into_response()
+}
+
+/// `GET /openapi.yaml`.
+pub async fn openapi() -> Response {
+    ([(header::CONTENT_TYPE, "application/yaml")], OPENAPI).into_response()
+}

@@ -1,0 +1,230 @@
+//! The router: every route in one table (method, path, whether it needs an API key, handler),
+//! from which both the axum router and [`routes`] (checked against openapi.yaml) are built;
+//! and the middleware every response passes through.
+
+use super::config::Config;
+use super::handlers::{jobs, meshes, ops};
+use super::problem::{self, Problem};
+use super::state::AppState;
+use super::telemetry;
+use axum::extract::{DefaultBodyLimit, Request};
+use axum::handler::Handler;
+use axum::http::{header, HeaderValue, StatusCode};
+use axum::middleware::{self, Next};
+use axum::response::{IntoResponse, Response};
+use axum::routing::{on, MethodFilter, MethodRouter};
+use axum::Router;
+use tower_http::catch_panic::CatchPanicLayer;
+use tower_http::compression::CompressionLayer;
+use tower_http::cors::{AllowOrigin, Any, CorsLayer};
+use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
+use tower_http::timeout::TimeoutLayer;
+use tower_http::trace::TraceLayer;
+
+/// The HTTP methods the API uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Method {
+    /// GET
+    Get,
+    /// POST
+    Post,
+    /// DELETE
+    Delete,
+}
+
+impl Method {
+    /// Lower-case name, as openapi.yaml's path items spell it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Method::Get => "get",
+            Method::Post => "post",
+            Method::Delete => "delete",
+        }
+    }
+    fn filter(self) -> MethodFilter {
+        match self {
+            Method::Get => MethodFilter::GET,
+            Method::Post => MethodFilter::POST,
+            Method::Delete => MethodFilter::DELETE,
+        }
+    }
+}
+
+/// One route of the table.
+struct Route {
+    method: Method,
+    path: &'static str,
+    /// Behind the API keys (every /v1 route).
+    keyed: bool,
+    handler: MethodRouter<AppState>,
+}
+
+fn route<H, T>(method: Method, path: &'static str, handler: H) -> Route
+where
+    H: Handler<T, AppState>,
+    T: 'static,
+{
+    Route {
+        method,
+        path,
+        keyed: path.starts_with("/v1/"),
+        handler: on(method.filter(), handler),
+    }
+}
+
+fn table() -> Vec<Route> {
+    use Method::{Delete, Get, Post};
+    vec![
+        route(Get, "/healthz", ops::healthz),
+        route(Get, "/readyz", ops::readyz),
+        route(Get, "/metrics", ops::metrics),
+        route(Get, "/version", ops::version),
+        route(Get, "/openapi.yaml", ops::openapi),
+        route(Post, "/v1/meshes", meshes::upload_mesh),
+        route(Get, "/v1/meshes/{id}", meshes::get_mesh),
+        route(Delete, "/v1/meshes/{id}", meshes::delete_mesh),
+        route(Get, "/v1/meshes/{id}/report", meshes::mesh_report),
+        route(Post, "/v1/jobs", jobs::submit_job),
+        route(Get, "/v1/jobs", jobs::list_jobs),
+        route(Get, "/v1/jobs/{id}", jobs::get_job),
+        route(Delete, "/v1/jobs/{id}", jobs::delete_job),
+        route(Post, "/v1/jobs/{id}/cancel", jobs::cancel_job),
+        route(Get, "/v1/jobs/{id}/result", jobs::job_result),
+        route(Get, "/v1/jobs/{id}/mesh", jobs::job_mesh),
+        route(Get, "/v1/jobs/{id}/patterns", jobs::job_patterns),
+    ]
+}
+
+/// Every route served, `(method, path)`; openapi.yaml lists exactly these (a test checks
+/// both directions, and requests each against the live server).
+pub fn routes() -> Vec<(&'static str, &'static str)> {
+    table()
+        .into_iter()
+        .map(|r| (r.method.as_str(), r.path))
+        .collect()
+}
+
+/// Turn every error response that is not yet a problem (axum rejections, 404/405 of the
+/// router, limits, timeouts, panics) into `application/problem+json`; count responses.
+async fn problem_layer(st: axum::extract::State<AppState>, req: Request, next: Next) -> Response {
+    let path = req.uri().path().to_string();
+    let res = next.run(req).await;
+    st.metrics.request(res.status().as_u16());
+    let status = res.status();
+    if status.as_u16() < 400 {
+        return res;
+    }
+    let is_problem = res
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .is_some_and(|v| v.as_bytes().starts_with(problem::PROBLEM_JSON.as_bytes()));
+    if is_problem {
+        return res;
+    }
+    let (parts, body) = res.into_parts();
+    let text = axum::body::to_bytes(body, 4096).await.unwrap_or_default();
+    let mut detail = String::from_utf8_lossy(&text).trim().to_string();
+    if detail.is_empty() {
+        detail = match status {
+            StatusCode::NOT_FOUND => format!("no route for {path}"),
+            StatusCode::METHOD_NOT_ALLOWED => format!("method not allowed on {path}"),
+            _ => status.canonical_reason().unwrap_or("error").to_string(),
+        };
+    }
+    let mut p = Problem::new(status, problem::slug_for(status), detail);
+    p.instance = Some(path);
+    let mut out = p.into_response();
+    for (k, v) in parts.headers.iter() {
+        if k != header::CONTENT_TYPE && k != header::CONTENT_LENGTH {
+            out.headers_mut().insert(k.clone(), v.clone());
+        }
+    }
+    out
+}
+
+/// Bearer API keys on /v1 (when configured).
+async fn auth_layer(st: axum::extract::State<AppState>, req: Request, next: Next) -> Response {
+    if st.api_keys.is_empty() {
+        return next.run(req).await;
+    }
+    let given = req
+        .headers()
+        .get(header::AUTHORIZATION)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.strip_prefix("Bearer "))
+        .map(str::trim);
+    // Compare with every key, without stopping early.
+    let ok = given.is_some_and(|g| {
+        st.api_keys.iter().fold(false, |acc, k| {
+            let eq = k.len() == g.len()
+                && k.bytes().zip(g.bytes()).fold(0u8, |d, (a, b)| d | (a ^ b)) == 0;
+            acc | eq
+        })
+    });
+    if ok {
+        next.run(req).await
+    } else {
+        Problem::new(
+            StatusCode::UNAUTHORIZED,
+            "unauthorized",
+            "a valid `Authorization: Bearer <api key>` header is required",
+        )
+        .into_response()
+    }
+}
+
+fn panic_to_problem(err: Box<dyn std::any::Any + Send + 'static>) -> Response {
+    let msg = err
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| err.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "panic".into());
+    tracing::error!(panic = %msg, "handler panicked");
+    Problem::internal("the server failed while handling the request").into_response()
+}
+
+/// The router with all middleware.
+pub fn router(st: AppState, cfg: &Config) -> Router {
+    let (mut keyed, mut open) = (Router::new(), Router::new());
+    // Routes of one path with different methods merge into one method router.
+    for r in table() {
+        if r.keyed {
+            keyed = keyed.route(r.path, r.handler);
+        } else {
+            open = open.route(r.path, r.handler);
+        }
+    }
+    let keyed = keyed.route_layer(middleware::from_fn_with_state(st.clone(), auth_layer));
+    let mut app = open
+        .merge(keyed)
+        .layer(DefaultBodyLimit::max(cfg.max_upload))
+        .layer(middleware::from_fn_with_state(st.clone(), problem_layer))
+        .layer(CatchPanicLayer::custom(panic_to_problem))
+        .layer(TimeoutLayer::with_status_code(
+            StatusCode::REQUEST_TIMEOUT,
+            cfg.request_timeout,
+        ))
+        .layer(CompressionLayer::new())
+        .layer(TraceLayer::new_for_http().make_span_with(telemetry::http_span))
+        .layer(PropagateRequestIdLayer::x_request_id())
+        .layer(SetRequestIdLayer::x_request_id(MakeRequestUuid));
+    if !cfg.cors_origins.is_empty() {
+        let origin = if cfg.cors_origins.iter().any(|o| o == "*") {
+            AllowOrigin::any()
+        } else {
+            AllowOrigin::list(
+                cfg.cors_origins
+                    .iter()
+                    .filter_map(|o| HeaderValue::from_str(o).ok()),
+            )
+        };
+        app = app.layer(
+            CorsLayer::new()
+                .allow_origin(origin)
+                .allow_methods(Any)
+                .allow_headers(Any)
+                .expose_headers([header::LOCATION, header::ETAG, header::RETRY_AFTER]),
+        );
+    }
+    app.with_state(st)
+}

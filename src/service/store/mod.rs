@@ -1,0 +1,169 @@
+//! Durable state: the job and mesh index behind the [`Store`] trait and the bytes behind
+//! [`Blobs`] (uploaded meshes `meshes/{id}`, job artifacts `jobs/{id}/{name}`). The embedded
+//! default is [`SqliteStore`] (SQLite for the index, [`FileBlobs`] under the data directory);
+//! a shared database for several replicas implements the same traits and runs the same
+//! [`contract`] suite. Nothing here knows of HTTP.
+
+pub mod contract;
+mod files;
+mod sqlite;
+
+pub use files::FileBlobs;
+pub use sqlite::SqliteStore;
+
+use super::domain::{JobRecord, MeshRecord, Status};
+
+/// A storage failure (the service answers 500 and logs it). Backend-neutral: a backend turns
+/// its driver's errors into [`StoreError::Backend`].
+#[derive(Debug, thiserror::Error)]
+pub enum StoreError {
+    /// The database refused or failed.
+    #[error("{backend}: {message}")]
+    Backend {
+        /// Which backend (`sqlite`, `postgres`).
+        backend: &'static str,
+        /// The driver's message.
+        message: String,
+    },
+    /// A blob could not be read or written.
+    #[error("blob {0}: {1}")]
+    Io(String, std::io::Error),
+    /// A stored row does not decode.
+    #[error("corrupt row: {0}")]
+    Corrupt(String),
+}
+
+/// Named byte strings: uploads and results. Keys are built by the service from generated ids
+/// (`meshes/{id}`, `jobs/{id}/{name}`); `jobs/{id}` names all of a job's blobs at once.
+pub trait Blobs: Send + Sync {
+    /// Store a blob atomically (a reader sees the old bytes or the new, never a part).
+    fn put_blob(&self, key: &str, bytes: &[u8]) -> Result<(), StoreError>;
+    /// Read a blob; None when absent.
+    fn get_blob(&self, key: &str) -> Result<Option<Vec<u8>>, StoreError>;
+    /// Delete a blob, or every blob under a prefix; absent is fine.
+    fn delete_blobs(&self, prefix: &str) -> Result<(), StoreError>;
+}
+
+/// Filters and page of `GET /v1/jobs`.
+#[derive(Debug, Clone, Default)]
+pub struct JobFilter {
+    /// Only jobs in this state.
+    pub status: Option<Status>,
+    /// Only jobs of this kind.
+    pub kind: Option<String>,
+    /// Only jobs inserted before this sequence number (the page token).
+    pub before_seq: Option<i64>,
+    /// Page size.
+    pub limit: usize,
+}
+
+/// Result of an insert that may hit an existing idempotency key.
+#[derive(Debug)]
+pub enum Inserted {
+    /// A new job.
+    New(JobRecord),
+    /// The job created earlier with the same idempotency key.
+    Existing(JobRecord),
+}
+
+/// The durable state of the service. Implementations are shared between the async handlers
+/// and the worker threads, so every method is a short blocking call.
+pub trait Store: Blobs {
+    /// Cheap liveness check of the backend.
+    fn ping(&self) -> Result<(), StoreError>;
+    /// Record an uploaded mesh (its blob is written first).
+    fn insert_mesh(&self, m: &MeshRecord) -> Result<(), StoreError>;
+    /// A mesh by id.
+    fn get_mesh(&self, id: &str) -> Result<Option<MeshRecord>, StoreError>;
+    /// Forget a mesh; false when absent.
+    fn delete_mesh(&self, id: &str) -> Result<bool, StoreError>;
+    /// Whether a queued or running job uses the mesh.
+    fn mesh_in_use(&self, id: &str) -> Result<bool, StoreError>;
+    /// Insert a job, or return the one with the same idempotency key. `seq` is assigned.
+    fn insert_job(&self, j: &JobRecord) -> Result<Inserted, StoreError>;
+    /// The job created with an idempotency key.
+    fn find_idempotent(&self, key: &str) -> Result<Option<JobRecord>, StoreError>;
+    /// A job by id.
+    fn get_job(&self, id: &str) -> Result<Option<JobRecord>, StoreError>;
+    /// `get_job` when it can be answered without waiting (no lock to wait for, no network):
+    /// None means "ask `get_job` from a blocking thread". Lets the async status poll skip a
+    /// thread hand-off.
+    fn try_get_job_now(&self, _id: &str) -> Option<Result<Option<JobRecord>, StoreError>> {
+        None
+    }
+    /// Overwrite a job's mutable fields.
+    fn update_job(&self, j: &JobRecord) -> Result<(), StoreError>;
+    /// Delete a job row; false when absent.
+    fn delete_job(&self, id: &str) -> Result<bool, StoreError>;
+    /// Jobs newest first, filtered.
+    fn list_jobs(&self, f: &JobFilter) -> Result<Vec<JobRecord>, StoreError>;
+    /// Jobs in a state, oldest first (recovery after a restart).
+    fn jobs_with_status(&self, s: Status) -> Result<Vec<JobRecord>, StoreError>;
+    /// Finished jobs whose results expired before `now`.
+    fn expired_jobs(&self, now: i64) -> Result<Vec<JobRecord>, StoreError>;
+    /// Periodic housekeeping off the request path (called about once a second).
+    fn maintain(&self) -> Result<(), StoreError> {
+        Ok(())
+    }
+
+    // Coordination: every process serving one store runs jobs through these, so that a job
+    // runs once whichever process took it, a cancel reaches the process running it, and a
+    // job whose process died runs again. Each is one atomic step of the backend.
+
+    /// Take the oldest queued job for `worker`, leased until `now + lease_ms`: it becomes
+    /// running, its attempts grow by one, its progress and outcome are cleared.
+    fn claim(&self, worker: &str, now: i64, lease_ms: i64)
+        -> Result<Option<JobRecord>, StoreError>;
+    /// Extend `worker`'s lease on job `id` (and record `progress` when given); says whether a
+    /// cancel was requested, or that the lease is lost (expired and taken, or the job ended
+    /// or was deleted), in which case the worker must stop and not write its result.
+    fn heartbeat(
+        &self,
+        worker: &str,
+        id: &str,
+        now: i64,
+        lease_ms: i64,
+        progress: Option<&serde_json::Value>,
+    ) -> Result<Lease, StoreError>;
+    /// Record the end of a job `worker` holds (status, error, artifacts, outcome, times from
+    /// `j`); false, and nothing written, when it no longer holds it.
+    fn finish(&self, worker: &str, j: &JobRecord) -> Result<bool, StoreError>;
+    /// Cancel job `id`: a queued job ends cancelled at once (results kept until
+    /// `expires_at`), a running one is flagged for its worker's next heartbeat.
+    fn request_cancel(
+        &self,
+        id: &str,
+        now: i64,
+        expires_at: i64,
+    ) -> Result<CancelOutcome, StoreError>;
+    /// Running jobs whose lease ran out before `now`: queued again (or cancelled, when a
+    /// cancel was requested), and returned.
+    fn requeue_expired(&self, now: i64, expires_at: i64) -> Result<Vec<JobRecord>, StoreError>;
+    /// How many jobs are in state `s`.
+    fn count_with_status(&self, s: Status) -> Result<usize, StoreError>;
+}
+
+/// What a heartbeat learns.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Lease {
+    /// The worker still holds the job.
+    Held {
+        /// Someone asked to cancel it.
+        cancel_requested: bool,
+    },
+    /// The worker no longer holds it.
+    Lost,
+}
+
+/// What a cancel request did.
+#[derive(Debug, Clone, PartialEq)]
+pub enum CancelOutcome {
+    /// No such job.
+    NotFound,
+    /// It was queued and is now cancelled.
+    Cancelled(JobRecord),
+    /// It is running; its worker will stop at its next heartbeat.
+    Requested(JobRecord),
+    /// It had already ended.
+    Ended(JobRecord),
+}

@@ -1,0 +1,224 @@
+//! The harness of the black-box service tests: a real `flatmesh serve` on a random loopback
+//! port, requests through reqwest, every JSON body checked against openapi.yaml's schemas.
+
+#![allow(dead_code)] // each test binary uses part of it
+
+use serde_json::{json, Value};
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+pub struct Server {
+    child: Child,
+    /// `http://127.0.0.1:PORT`.
+    pub base: String,
+    /// Its data directory.
+    pub dir: PathBuf,
+}
+
+impl Server {
+    pub fn start(dir: &Path, args: &[&str]) -> Server {
+        std::fs::create_dir_all(dir).unwrap();
+        let log = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(dir.join("server.log"))
+            .unwrap();
+        let mut child = Command::new(env!("CARGO_BIN_EXE_flatmesh"))
+            .arg("serve")
+            .args(["--bind", "127.0.0.1:0", "--data-dir"])
+            .arg(dir)
+            .args(args)
+            .env_remove("FLATMESH_API_KEYS")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::from(log))
+            .spawn()
+            .expect("start flatmesh serve");
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        let base = line
+            .trim()
+            .strip_prefix("listening on ")
+            .unwrap_or_else(|| panic!("unexpected first line {line:?}"))
+            .to_string();
+        Server {
+            child,
+            base,
+            dir: dir.to_path_buf(),
+        }
+    }
+    pub fn url(&self, path: &str) -> String {
+        format!("{}{}", self.base, path)
+    }
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+    /// SIGKILL: the process dies without any chance to tidy up.
+    pub fn kill(mut self) -> PathBuf {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        self.dir.clone()
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+pub fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("flatmesh-svc-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+pub fn fixture(name: &str) -> Vec<u8> {
+    std::fs::read(format!("fixtures/{name}.obj")).expect("fixture file")
+}
+
+/// A saddle z = 0.3(x² − y²) on an n×n grid: flattening it with a tolerance that cannot be
+/// reached keeps a worker busy for seconds, checking cancellation every iteration.
+pub fn saddle_obj(n: usize) -> Vec<u8> {
+    let mut s = String::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            let x = i as f64 / n as f64 * 2.0 - 1.0;
+            let y = j as f64 / n as f64 * 2.0 - 1.0;
+            s += &format!("v {x:.6} {y:.6} {:.6}\n", 0.3 * (x * x - y * y));
+        }
+    }
+    for j in 0..n {
+        for i in 0..n {
+            let a = j * (n + 1) + i + 1;
+            let (b, c) = (a + 1, a + n + 1);
+            s += &format!("f {a} {b} {}\nf {a} {} {c}\n", c + 1, c + 1);
+        }
+    }
+    s.into_bytes()
+}
+
+pub const SLOW: &str = r#"{"tolerance": 1e-300, "max_iterations": 100000}"#;
+
+// ---------------------------------------------------------------- openapi
+
+pub fn openapi() -> Value {
+    let text = std::fs::read_to_string("src/service/openapi.yaml").unwrap();
+    let y: serde_yaml::Value = serde_yaml::from_str(&text).unwrap();
+    serde_json::to_value(y).unwrap()
+}
+
+/// Validate `v` against `#/components/schemas/{name}` of openapi.yaml (JSON Schema 2020-12).
+pub fn check(name: &str, v: &Value) {
+    thread_local! {
+        static DOC: Value = openapi();
+    }
+    DOC.with(|doc| {
+        let mut schema = doc.clone();
+        schema["$ref"] = json!(format!("#/components/schemas/{name}"));
+        let validator = jsonschema::validator_for(&schema).expect("schema compiles");
+        let errors: Vec<String> = validator
+            .iter_errors(v)
+            .map(|e| format!("{} at {}", e, e.instance_path()))
+            .collect();
+        assert!(
+            errors.is_empty(),
+            "{name} does not match openapi.yaml: {errors:?}\n{v:#}"
+        );
+    });
+}
+
+pub async fn json_of(res: reqwest::Response, schema: &str) -> Value {
+    let v: Value = res.json().await.expect("JSON body");
+    check(schema, &v);
+    v
+}
+
+/// Assert a problem+json answer of `status`, valid against the schema; returns it.
+pub async fn problem(res: reqwest::Response, status: u16) -> Value {
+    assert_eq!(res.status().as_u16(), status, "status");
+    assert_eq!(
+        res.headers()["content-type"].to_str().unwrap(),
+        "application/problem+json"
+    );
+    let v = json_of(res, "Problem").await;
+    assert_eq!(v["status"], status);
+    v
+}
+
+/// A multipart part holding fixture `name` as an OBJ file called `file`.
+pub fn obj_part(name: &str, file: &str) -> reqwest::multipart::Part {
+    reqwest::multipart::Part::bytes(fixture(name))
+        .file_name(file.to_string())
+        .mime_str("model/obj")
+        .unwrap()
+}
+
+/// `POST /v1/jobs` with a multipart body.
+pub async fn post_jobs_form(
+    c: &reqwest::Client,
+    s: &Server,
+    form: reqwest::multipart::Form,
+) -> reqwest::Response {
+    c.post(s.url("/v1/jobs"))
+        .multipart(form)
+        .send()
+        .await
+        .unwrap()
+}
+
+pub fn client() -> reqwest::Client {
+    reqwest::Client::builder()
+        .timeout(Duration::from_secs(60))
+        .build()
+        .unwrap()
+}
+
+pub async fn upload(c: &reqwest::Client, s: &Server, bytes: Vec<u8>) -> Value {
+    let r = c
+        .post(s.url("/v1/meshes"))
+        .header("content-type", "model/obj")
+        .body(bytes)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 201);
+    json_of(r, "Mesh").await
+}
+
+pub async fn submit(c: &reqwest::Client, s: &Server, body: Value) -> Value {
+    check("JobRequest", &body);
+    let r = c.post(s.url("/v1/jobs")).json(&body).send().await.unwrap();
+    assert_eq!(r.status(), 202, "{:?}", r.text().await);
+    json_of(r, "Job").await
+}
+
+pub async fn job(c: &reqwest::Client, s: &Server, id: &str) -> Value {
+    let r = c
+        .get(s.url(&format!("/v1/jobs/{id}")))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    json_of(r, "Job").await
+}
+
+pub async fn wait_for(c: &reqwest::Client, s: &Server, id: &str, want: &[&str]) -> Value {
+    let start = Instant::now();
+    loop {
+        let j = job(c, s, id).await;
+        if want.contains(&j["status"].as_str().unwrap()) {
+            return j;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "job {id} still {} (waiting for {want:?})",
+            j["status"]
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
