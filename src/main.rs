@@ -38,31 +38,12 @@ enum Command {
     /// DIR receives the files a service job stores: report.json (the flattenability report of
     /// the output mesh, the job's own figures under "job"), mesh.glb, mesh.gltf and mesh.obj;
     /// `flatten`, and the kinds that change the mesh (their output flattened with flatten's
-    /// defaults), also write patterns.json, patterns.svg and patterns.dxf. Progress goes to stderr. Exit status: 0 on success, 2
-    /// for invalid input or parameters, 3 when an optimiser (fl-mesh, subdivide) ran and wrote
-    /// its best result but did not converge (one line on stderr gives the ϖ_max reached, why it
-    /// stopped and the stuck vertices), 1 on other failures.
+    /// defaults), also write patterns.json, patterns.svg and patterns.dxf. Progress goes to
+    /// stderr. Exit status: 0 on success, 2 for invalid input or parameters, 3 when an
+    /// optimiser ran and wrote its best result but did not converge (one line on stderr gives
+    /// the ϖ_max reached, why it stopped and the stuck vertices), 1 on other failures.
     ///
-    /// flatten parameters: method=lpfb|lscm (lpfb), unit=mm|cm|dm|m|in (drawing unit, mm),
-    /// input_unit=auto|mm|cm|dm|m|in (the mesh's unit; auto guesses it from the size),
-    /// cuts=auto|virtual|real (auto: loops that enclose curvature are cut open, the others
-    /// stay holes), curvature_tolerance (1e-3 rad), interior=arap|harmonic (arap),
-    /// boundary_angles=conformal|surface (conformal), max_iterations (200), tolerance (1e-5),
-    /// svg_triangles=true|false (false).
-    ///
-    /// fl-mesh parameters: w1 (1), w2 (0.1), tau (0.25), step_rule=merit|fixed|lm (merit),
-    /// anchor=input|closest (input), until=flattenable|stationary (flattenable), tolerance
-    /// (1e-6 rad), step_tolerance (1e-5), max_iterations (600), refine=true|false (true),
-    /// max_refinements (3), stall_iterations (40), linear_solver=ldlt|lu (ldlt),
-    /// shape_guard=true|false (false), shape_penalty (1; 0: the paper's model), min_angle (2
-    /// degrees). The best
-    /// iterate is written (never worse than the input in ϖ_max); when it is not flattenable
-    /// the exit status is 3.
-    ///
-    /// subdivide (Sec. 3 of Wang's FL meshes) also writes level_<k>.glb, .gltf and .obj for
-    /// every level; parameters: levels (1; or --levels), curves (or --curves), split_ratio
-    /// (0.5), first_order_runs (10), second_order_runs (100), flatten_levels=true|false
-    /// (true), fl_mesh={...} (the fl-mesh parameters used on each level).
+    /// The kinds and their parameters follow.
     Run {
         /// Job kind.
         #[arg(value_parser = clap::builder::PossibleValuesParser::new(Kind::names()))]
@@ -98,8 +79,32 @@ enum Command {
     Client(flatmesh::service::client::ClientArgs),
 }
 
+/// The kinds of the registry with their parameters, for `run --help`.
+fn kinds_help() -> String {
+    let mut out = String::from("Kinds:\n");
+    for k in Kind::ALL {
+        let reference = match k.reference() {
+            flatmesh::jobs::Reference::None => "",
+            flatmesh::jobs::Reference::Optional => " Takes --reference (optional).",
+            flatmesh::jobs::Reference::Required => " Needs --reference.",
+        };
+        out += &format!(
+            "\n  {}: {}.{reference}\n    parameters: {}.\n",
+            k.name(),
+            k.about(),
+            k.params_help()
+        );
+    }
+    out
+}
+
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    use clap::{CommandFactory, FromArgMatches};
+    let cmd = Cli::command().mut_subcommand("run", |c| c.after_long_help(kinds_help()));
+    let cli = match Cli::from_arg_matches(&cmd.get_matches()) {
+        Ok(c) => c,
+        Err(e) => e.exit(),
+    };
     match cli.command {
         Command::Report { mesh, json, glb } => report(&mesh, json, glb.as_deref()),
         Command::Run {

@@ -91,22 +91,51 @@ fn openapi_parameter_defaults_are_the_code_defaults() {
     }
 }
 
-/// README's list of kinds and the CLI's `run --help` name every kind of the registry.
+/// The CLI's `run --help` shows every kind of the registry with its help, and each kind's
+/// help names exactly the parameters its `Params` struct has.
 #[test]
-fn readme_and_cli_list_every_kind() {
-    let readme = std::fs::read_to_string("README.md").unwrap();
+fn cli_help_documents_every_kind_and_parameter() {
+    use flatmesh::jobs::{JobSpec, Kind};
     let help = std::process::Command::new(env!("CARGO_BIN_EXE_flatmesh"))
         .args(["run", "--help"])
         .output()
         .unwrap();
     let help = String::from_utf8_lossy(&help.stdout);
-    for kind in flatmesh::jobs::Kind::ALL {
+    for kind in Kind::ALL {
         let k = kind.name();
-        assert!(
-            readme.contains(&format!("`{k}`")),
-            "README does not name `{k}`"
+        assert!(help.contains(&format!("{k}: {}", kind.about())), "{k}");
+        assert!(help.contains(kind.params_help()), "{k}: parameters");
+        // Top-level items of "a=x|y (d), b (d, note), …": the name before `=`, ` ` or `(`.
+        let mut documented = Vec::new();
+        let (mut depth, mut item) = (0, String::new());
+        for ch in kind.params_help().chars().chain([',']) {
+            match ch {
+                '(' | '{' => depth += 1,
+                ')' | '}' => depth -= 1,
+                ',' if depth == 0 => {
+                    let name: String = item
+                        .trim()
+                        .chars()
+                        .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+                        .collect();
+                    if !name.is_empty() && name != "none" {
+                        documented.push(name);
+                    }
+                    item.clear();
+                    continue;
+                }
+                _ => {}
+            }
+            item.push(ch);
+        }
+        let params = JobSpec::parse(k, &serde_json::Map::new()).unwrap().params();
+        let mut actual: Vec<String> = params.as_object().unwrap().keys().cloned().collect();
+        documented.sort();
+        actual.sort();
+        assert_eq!(
+            documented, actual,
+            "{k}: parameters in its help vs its Params"
         );
-        assert!(help.contains(k), "run --help does not name {k}");
     }
 }
 

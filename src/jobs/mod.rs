@@ -62,6 +62,53 @@ impl Kind {
         Kind::ALL.iter().map(|k| k.name()).collect()
     }
 
+    /// One line on what the kind does (CLI help).
+    pub fn about(self) -> &'static str {
+        match self {
+            Kind::Report => "the flattenability report of the input; the mesh is unchanged",
+            Kind::Flatten => {
+                "sewing-pattern pieces (LPFB), one per connected part of each patch; also \
+                 writes patterns.json, .svg and .dxf"
+            }
+            Kind::FlMesh => {
+                "make the mesh flattenable (FL-mesh optimisation); the best iterate is written, \
+                 never worse than the input in ϖ_max"
+            }
+            Kind::Subdivide => {
+                "variational subdivision of an FL mesh (Sec. 3 of Wang's FL meshes); also \
+                 writes level_<k>.glb, .gltf and .obj for every level"
+            }
+        }
+    }
+
+    /// Its parameters with their defaults (CLI help; openapi.yaml has the schemas).
+    pub fn params_help(self) -> &'static str {
+        match self {
+            Kind::Report => "none",
+            Kind::Flatten => {
+                "method=lpfb|lscm (lpfb), unit=mm|cm|dm|m|in (drawing unit, mm), \
+                 input_unit=auto|mm|cm|dm|m|in (the mesh's unit; auto guesses it from the size), \
+                 cuts=auto|virtual|real (auto: loops that enclose curvature are cut open, the \
+                 others stay holes), curvature_tolerance (1e-3 rad), interior=arap|harmonic \
+                 (arap), boundary_angles=conformal|surface (conformal), max_iterations (200), \
+                 tolerance (1e-5), svg_triangles=true|false (false)"
+            }
+            Kind::FlMesh => {
+                "w1 (1), w2 (0.1), tau (0.25), step_rule=merit|fixed|lm (merit), \
+                 anchor=input|closest (input), until=flattenable|stationary (flattenable), \
+                 tolerance (1e-6 rad), step_tolerance (1e-5), max_iterations (600), \
+                 refine=true|false (true), max_refinements (3), stall_iterations (40), \
+                 linear_solver=ldlt|lu (ldlt), shape_guard=true|false (false), shape_penalty \
+                 (1; 0: the paper's model), min_angle (2 degrees)"
+            }
+            Kind::Subdivide => {
+                "levels (1; or --levels), curves (or --curves), split_ratio (0.5), \
+                 first_order_runs (10), second_order_runs (100), flatten_levels=true|false \
+                 (true), fl_mesh={...} (the fl-mesh parameters used on each level)"
+            }
+        }
+    }
+
     /// Whether it takes a reference body.
     pub fn reference(self) -> Reference {
         match self {
