@@ -652,6 +652,90 @@ async fn fl_mesh_job_end_to_end() {
     );
 }
 
+/// A perturb job against a reference body sent in the same multipart request: the result
+/// validates, the downloaded mesh is no less flattenable than the input by the library's own
+/// measure, no vertex that started outside the body ends inside (recomputed here).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn perturb_job_end_to_end() {
+    let s = Server::start(&tmp("k-perturb"), &[]);
+    let c = client();
+    let garment = fixture("cylinder_noisy");
+    let (gmesh, _) = flatmesh::io::load(&garment, flatmesh::io::Format::Obj).unwrap();
+    // The body: the noiseless cylinder shrunk towards its axis (x, y by 0.9), closed by the
+    // input's own open ends being irrelevant: an open body is accepted with a warning.
+    let (cyl, _) = flatmesh::io::load(&fixture("cylinder"), flatmesh::io::Format::Obj).unwrap();
+    let mut obj = String::new();
+    for p in cyl.positions() {
+        obj += &format!("v {} {} {}\n", 0.9 * p[0], 0.9 * p[1], p[2]);
+    }
+    for t in cyl.triangles() {
+        obj += &format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1);
+    }
+    let body_bytes = obj.into_bytes();
+    let form = reqwest::multipart::Form::new()
+        .part(
+            "job",
+            reqwest::multipart::Part::text(
+                json!({"kind": "perturb", "params": {"clearance": 0.0}}).to_string(),
+            )
+            .mime_str("application/json")
+            .unwrap(),
+        )
+        .part("mesh", obj_part("cylinder_noisy", "garment.obj"))
+        .part(
+            "reference",
+            reqwest::multipart::Part::bytes(body_bytes.clone())
+                .file_name("body.obj")
+                .mime_str("model/obj")
+                .unwrap(),
+        );
+    let r = post_jobs_form(&c, &s, form).await;
+    assert_eq!(r.status(), 202);
+    let j = json_of(r, "Job").await;
+    assert!(j["reference_mesh_id"].is_string(), "{j}");
+    let id = j["id"].as_str().unwrap();
+    let done = wait_for(&c, &s, id, &["succeeded", "failed"]).await;
+    assert_eq!(done["status"], "succeeded", "{done}");
+    let result = json_of(
+        c.get(s.url(&format!("/v1/jobs/{id}/result")))
+            .send()
+            .await
+            .unwrap(),
+        "Report",
+    )
+    .await;
+    let fig = &result["job"];
+    assert_eq!(fig["kind"], "perturb");
+    assert!(fig["body"]["clearance_after"].is_array(), "{fig}");
+    let r = c
+        .get(s.url(&format!("/v1/jobs/{id}/mesh?format=obj")))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    let (out, _) =
+        flatmesh::io::load(&r.bytes().await.unwrap(), flatmesh::io::Format::Obj).unwrap();
+    let w = |m: &flatmesh::mesh::Mesh| {
+        flatmesh::geometry::flattenability(m, &flatmesh::geometry::angle_sums(m))
+            .into_iter()
+            .fold(0.0, f64::max)
+    };
+    assert!(w(&out) <= w(&gmesh) + 1e-9, "{} > {}", w(&out), w(&gmesh));
+    assert!(
+        (w(&out) - fig["max_flattenability_after"].as_f64().unwrap()).abs() < 1e-9,
+        "{fig}"
+    );
+    let (body, _) = flatmesh::io::load(&body_bytes, flatmesh::io::Format::Obj).unwrap();
+    let (b, _) = flatmesh::algorithms::perturb::Body::new(&body);
+    for v in 0..gmesh.num_vertices() as u32 {
+        let before = b.clearance(gmesh.position(v)).signed;
+        let after = b.clearance(out.position(v)).signed;
+        if before >= 0.0 {
+            assert!(after >= -1e-9, "vertex {v}: {before} -> {after}");
+        }
+    }
+}
+
 /// A subdivide job with a curve on a rim edge, and one with a curve it must refuse.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn subdivide_job_end_to_end() {

@@ -6,6 +6,7 @@
 
 pub mod fl_mesh;
 pub mod flatten;
+pub mod perturb;
 pub mod report_job;
 pub mod subdivide;
 

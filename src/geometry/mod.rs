@@ -50,7 +50,12 @@ pub fn angle_sums(mesh: &Mesh) -> Vec<f64> {
 
 /// θ(v) for one vertex, from its fan.
 pub fn angle_sum_at(mesh: &Mesh, v: u32) -> f64 {
-    let p = mesh.position(v);
+    angle_sum_with(mesh, mesh.positions(), v)
+}
+
+/// θ(v) with the mesh's connectivity and the positions `pos` (an optimiser's iterate).
+pub fn angle_sum_with(mesh: &Mesh, pos: &[[f64; 3]], v: u32) -> f64 {
+    let p = pos[v as usize];
     mesh.conn()
         .fan_of(v)
         .iter()
@@ -59,8 +64,8 @@ pub fn angle_sum_at(mesh: &Mesh, v: u32) -> f64 {
             let k = h as usize % 3;
             corner_angle(
                 p,
-                mesh.position(t[(k + 1) % 3]),
-                mesh.position(t[(k + 2) % 3]),
+                pos[t[(k + 1) % 3] as usize],
+                pos[t[(k + 2) % 3] as usize],
             )
         })
         .sum()
@@ -213,19 +218,24 @@ pub fn corner_angle_gradient(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> ([f64; 3]
 /// `Σ (cot ξ + cot γ)/|pq|² (p − q)`. Eq. 12 as printed divides by |pq| only; Appendix B's
 /// derivation and finite differences (tests/gradients.rs) both give |pq|².
 pub fn theta_gradient(mesh: &Mesh, q: u32, out: &mut Vec<(u32, [f64; 3])>) {
+    theta_gradient_with(mesh, mesh.positions(), q, out)
+}
+
+/// [`theta_gradient`] with the mesh's connectivity and the positions `pos`.
+pub fn theta_gradient_with(mesh: &Mesh, pos: &[[f64; 3]], q: u32, out: &mut Vec<(u32, [f64; 3])>) {
     out.clear();
     let conn = mesh.conn();
     let ring = conn.ring_of(q);
     out.push((q, [0.0; 3]));
     out.extend(ring.iter().map(|&p| (p, [0.0; 3])));
     let closed = ring.len() == conn.fan_of(q).len();
-    let pq = mesh.position(q);
+    let pq = pos[q as usize];
     let n = ring.len();
     for (j, &h) in conn.fan_of(q).iter().enumerate() {
         let t = mesh.triangles()[h as usize / 3];
         let k = h as usize % 3;
         let (b, c) = (t[(k + 1) % 3], t[(k + 2) % 3]);
-        let (gb, gc) = corner_angle_gradient(pq, mesh.position(b), mesh.position(c));
+        let (gb, gc) = corner_angle_gradient(pq, pos[b as usize], pos[c as usize]);
         // Face j spans ring[j] -> ring[j+1].
         let jb = 1 + j;
         let jc = 1 + if closed { (j + 1) % n } else { j + 1 };

@@ -9,7 +9,7 @@
 pub mod artifacts;
 
 use crate::algorithms::{
-    self, fl_mesh, flatten, parse_params, report_job, subdivide, AlgoError, Control,
+    self, fl_mesh, flatten, parse_params, perturb, report_job, subdivide, AlgoError, Control,
 };
 use crate::mesh::Mesh;
 use serde::Serialize;
@@ -25,6 +25,8 @@ pub enum Kind {
     FlMesh,
     /// Variational subdivision of an FL mesh.
     Subdivide,
+    /// Local flattenable perturbation against a reference body.
+    Perturb,
 }
 
 /// Whether a kind takes a reference body (`reference_mesh_id`, `--reference`).
@@ -40,7 +42,13 @@ pub enum Reference {
 
 impl Kind {
     /// Every kind, in the order the CLI and the API list them.
-    pub const ALL: [Kind; 4] = [Kind::Report, Kind::Flatten, Kind::FlMesh, Kind::Subdivide];
+    pub const ALL: [Kind; 5] = [
+        Kind::Report,
+        Kind::Flatten,
+        Kind::FlMesh,
+        Kind::Subdivide,
+        Kind::Perturb,
+    ];
 
     /// The kind's name in requests, on the command line and in the API.
     pub fn name(self) -> &'static str {
@@ -49,6 +57,7 @@ impl Kind {
             Kind::Flatten => "flatten",
             Kind::FlMesh => "fl-mesh",
             Kind::Subdivide => "subdivide",
+            Kind::Perturb => "perturb",
         }
     }
 
@@ -78,6 +87,10 @@ impl Kind {
                 "variational subdivision of an FL mesh (Sec. 3 of Wang's FL meshes); also \
                  writes level_<k>.glb, .gltf and .obj for every level"
             }
+            Kind::Perturb => {
+                "local flattenable perturbation (Sec. 4 of Wang's FL meshes): small moves around \
+                 the least flattenable vertices, never into the reference body"
+            }
         }
     }
 
@@ -106,6 +119,11 @@ impl Kind {
                  first_order_runs (10), second_order_runs (100), flatten_levels=true|false \
                  (true), fl_mesh={...} (the fl-mesh parameters used on each level)"
             }
+            Kind::Perturb => {
+                "method=local (local: Algorithm 2), rings (3), tau (0.1), inner_iterations (5), \
+                 heap_fraction (0.5), tolerance (1e-3 rad), stall_outer (10), max_outer (50), \
+                 clearance (0: least signed distance to the reference body, mesh units)"
+            }
         }
     }
 
@@ -113,6 +131,7 @@ impl Kind {
     pub fn reference(self) -> Reference {
         match self {
             Kind::Report | Kind::Flatten | Kind::FlMesh | Kind::Subdivide => Reference::None,
+            Kind::Perturb => Reference::Optional,
         }
     }
 }
@@ -142,6 +161,8 @@ pub enum JobSpec {
     FlMesh(fl_mesh::Params),
     /// `subdivide`.
     Subdivide(subdivide::Params),
+    /// `perturb`.
+    Perturb(perturb::Params),
 }
 
 impl JobSpec {
@@ -168,6 +189,11 @@ impl JobSpec {
                 p.check().map_err(SpecError::Params)?;
                 JobSpec::Subdivide(p)
             }
+            Kind::Perturb => {
+                let p: perturb::Params = parse_params(params).map_err(SpecError::Params)?;
+                p.check().map_err(SpecError::Params)?;
+                JobSpec::Perturb(p)
+            }
         })
     }
 
@@ -193,6 +219,7 @@ impl JobSpec {
             JobSpec::Flatten(_) => Kind::Flatten,
             JobSpec::FlMesh(_) => Kind::FlMesh,
             JobSpec::Subdivide(_) => Kind::Subdivide,
+            JobSpec::Perturb(_) => Kind::Perturb,
         }
     }
 
@@ -203,6 +230,7 @@ impl JobSpec {
             JobSpec::Flatten(p) => serde_json::to_value(p),
             JobSpec::FlMesh(p) => serde_json::to_value(p),
             JobSpec::Subdivide(p) => serde_json::to_value(p),
+            JobSpec::Perturb(p) => serde_json::to_value(p),
         }
         .unwrap_or_default()
     }
@@ -222,6 +250,9 @@ impl JobSpec {
             JobSpec::Flatten(p) => flatten::run(mesh, p, control)?.into_job(Figures::Flatten),
             JobSpec::FlMesh(p) => fl_mesh::run(mesh, p, control)?.into_job(Figures::FlMesh),
             JobSpec::Subdivide(p) => subdivide::run(mesh, p, control)?.into_job(Figures::Subdivide),
+            JobSpec::Perturb(p) => {
+                perturb::run(mesh, input.reference.as_ref(), p, control)?.into_job(Figures::Perturb)
+            }
         })
     }
 }
@@ -247,6 +278,8 @@ pub enum Figures {
     FlMesh(fl_mesh::Summary),
     /// `subdivide`.
     Subdivide(subdivide::Summary),
+    /// `perturb`.
+    Perturb(perturb::Summary),
 }
 
 impl Figures {
@@ -256,6 +289,7 @@ impl Figures {
             Figures::Report(_) | Figures::Flatten(_) => None,
             Figures::FlMesh(s) => Some(s.report.converged),
             Figures::Subdivide(s) => Some(s.converged),
+            Figures::Perturb(s) => Some(s.converged),
         }
     }
 
@@ -265,6 +299,7 @@ impl Figures {
             Figures::Report(_) | Figures::Flatten(_) => None,
             Figures::FlMesh(s) => Some(&s.report.stop_reason),
             Figures::Subdivide(s) => s.stop_reason.as_deref(),
+            Figures::Perturb(s) => Some(s.stop_reason.as_str()),
         }
     }
 
@@ -274,6 +309,7 @@ impl Figures {
             Figures::Report(_) | Figures::Flatten(_) => &[],
             Figures::FlMesh(s) => &s.report.stuck_vertices,
             Figures::Subdivide(s) => &s.stuck_vertices,
+            Figures::Perturb(_) => &[],
         }
     }
 
@@ -281,6 +317,7 @@ impl Figures {
     pub fn warnings(&self) -> &[String] {
         match self {
             Figures::Flatten(s) => &s.job_warnings,
+            Figures::Perturb(s) => &s.warnings,
             Figures::Report(_) | Figures::FlMesh(_) | Figures::Subdivide(_) => &[],
         }
     }

@@ -1,0 +1,324 @@
+//! The `perturb` job: local flattenable perturbation against an optional reference body
+//! (wang-flattenable-laplacian-meshes, Sec. 4, Eq. 18–24, Algorithm 2). An almost flattenable
+//! mesh is improved by small moves around its least flattenable vertices, keeping clear of the
+//! body it is worn on.
+//!
+//! `method = "local"` is Algorithm 2 as written: a max-heap of interior vertices keyed by ϖ;
+//! while its top exceeds `heap_fraction`·ϖ_best, the top vertex is popped and the interior
+//! vertices of its r-ring disk (V_act, Eq. 18) move to make the interior vertices of its
+//! (r+1)-ring disk (V_dev, Eq. 19) flattenable, closest to the input (J_pos, Eq. 5), by
+//! `inner_iterations` damped steps v ← v + τδ of the KKT system Eq. 22. After each outer
+//! iteration the best positions so far are kept (l.15–17); the run stops when ϖ_best ≤
+//! `tolerance`, after `stall_outer` outer iterations without a new best, or after
+//! `max_outer`. Defaults are the paper's (r = 3, τ = 0.1, 5 inner iterations, 0.5, 1e-3 rad,
+//! 10, 50).
+//!
+//! Choices where the paper is vague (../shared/notes/paper-notes.md, part A.3):
+//! - The position term sums over V_act (Eq. 20), not V_dev (Eq. 21's typo; the extra terms
+//!   are constants). v⁰ is the input position for the whole run, so drift cannot accumulate.
+//! - "More than 5 times" is read as `inner_iterations` = 5, "more than 50" as 50 outer.
+//! - ϖ_max in l.6 is the recorded best. The heap is rebuilt from the current ϖ at the start of
+//!   every outer iteration (l.18's re-insertion and re-keying); within one, keys are stale, as
+//!   written.
+//! - The step is the minimum-norm solution of Eq. 22 through a thin SVD of Λ itself, singular
+//!   values below 1e-3·σ_max dropped ([`min_norm_step`]; why that cutoff: `SVD_CUTOFF` in
+//!   local.rs), not of ΛΛᵀ (Eq. 23), which would square the condition number; where Eq. 23 is
+//!   well posed the two agree (tested against an independent dense solve of Eq. 22).
+//! - Rows are scaled so that all are O(1): θ rows by the mean edge length h̄.
+//! - Body constraints (Eq. 20's inequality) by an active set rather than the paper's equality
+//!   linearisation: V_collid = the moved vertices with signed clearance s below `clearance`;
+//!   after a solve, rows whose multiplier would pull the vertex towards the body (λ > 0) are
+//!   dropped and the system solved again. The row of vertex r is ∇s(v_r)·δ_r = clearance − s_r,
+//!   ∇s the unit offset from the closest point (the pseudo-normal on the surface).
+//! - Hard guarantee beyond the linearisation: every damped step is checked with the exact
+//!   signed distance; a vertex may not end below min(`clearance`, where it started). A vertex
+//!   that would is added to the active set and the step solved again; if that does not help,
+//!   the step is halved (up to 10 times) or not taken. So a vertex that starts at ≥ clearance
+//!   never ends below it, and penetrating vertices never increase.
+//! - Closest points are recomputed for every query with the grid (exact), not tracked locally
+//!   as in [48]; measured fast enough at these sizes.
+//!
+//! An input whose ϖ_max is within `tolerance` comes back bit-identical after 0 iterations.
+//! Boundary and seam vertices never move (they are not interior), and vertices outside every
+//! popped centre's r-ring disk are never written.
+
+mod body;
+mod local;
+
+pub use body::{Body, Clearance};
+pub use local::min_norm_step;
+
+use super::{AlgoError, Control, Distance, Outcome};
+use crate::mesh::Mesh;
+use serde::{Deserialize, Serialize};
+
+/// Which algorithm runs.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    /// Algorithm 2 of the paper.
+    #[default]
+    Local,
+}
+
+/// Parameters of `perturb` (defaults: the paper's).
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Params {
+    /// `local` (Algorithm 2).
+    pub method: Method,
+    /// Ring number r of the moved disk V_act (Eq. 18).
+    pub rings: usize,
+    /// Damping τ of each step.
+    pub tau: f64,
+    /// Damped steps per popped vertex.
+    pub inner_iterations: usize,
+    /// Vertices are popped while their ϖ exceeds this fraction of the best ϖ_max.
+    pub heap_fraction: f64,
+    /// Target ϖ_max in radians (the paper's ε).
+    pub tolerance: f64,
+    /// Outer iterations without a new best ϖ_max before stopping.
+    pub stall_outer: usize,
+    /// Most outer iterations.
+    pub max_outer: usize,
+    /// Least signed distance to the reference body, in mesh units (the paper's ϵ).
+    pub clearance: f64,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Params {
+            method: Method::Local,
+            rings: 3,
+            tau: 0.1,
+            inner_iterations: 5,
+            heap_fraction: 0.5,
+            tolerance: 1e-3,
+            stall_outer: 10,
+            max_outer: 50,
+            clearance: 0.0,
+        }
+    }
+}
+
+fn bad(key: &str, message: &str) -> AlgoError {
+    AlgoError::InvalidParam {
+        key: key.into(),
+        message: message.into(),
+    }
+}
+
+impl Params {
+    /// Check ranges.
+    pub fn check(&self) -> Result<(), AlgoError> {
+        if !(1..=10).contains(&self.rings) {
+            return Err(bad("rings", "must be in 1..=10"));
+        }
+        if !(self.tau > 0.0 && self.tau <= 1.0) {
+            return Err(bad("tau", "must be in (0, 1]"));
+        }
+        if !(1..=100).contains(&self.inner_iterations) {
+            return Err(bad("inner_iterations", "must be in 1..=100"));
+        }
+        if !(0.0..1.0).contains(&self.heap_fraction) {
+            return Err(bad("heap_fraction", "must be in [0, 1)"));
+        }
+        if !(self.tolerance > 0.0 && self.tolerance.is_finite()) {
+            return Err(bad("tolerance", "must be positive"));
+        }
+        if !(1..=10_000).contains(&self.stall_outer) {
+            return Err(bad("stall_outer", "must be in 1..=10000"));
+        }
+        if !(1..=10_000).contains(&self.max_outer) {
+            return Err(bad("max_outer", "must be in 1..=10000"));
+        }
+        if !(self.clearance >= 0.0 && self.clearance.is_finite()) {
+            return Err(bad(
+                "clearance",
+                "must be a finite distance ≥ 0 (mesh units)",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Why the run stopped (l.19).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Stop {
+    /// ϖ_max within the tolerance.
+    Tolerance,
+    /// `stall_outer` outer iterations without a new best.
+    Stall,
+    /// `max_outer` outer iterations.
+    MaxOuter,
+}
+
+impl Stop {
+    /// The wire name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Stop::Tolerance => "tolerance",
+            Stop::Stall => "stall",
+            Stop::MaxOuter => "max_outer",
+        }
+    }
+}
+
+/// One outer iteration.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct HistoryEntry {
+    /// Outer iteration (1-based).
+    pub iteration: usize,
+    /// ϖ_max after it.
+    pub max_flattenability: f64,
+    /// Best ϖ_max so far.
+    pub best: f64,
+    /// Vertices popped from the heap.
+    pub centres: usize,
+}
+
+/// How the output sits against the reference body.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BodyFigures {
+    /// The clearance asked for.
+    pub clearance: f64,
+    /// Vertices inside the body (signed distance < 0), before and after.
+    pub penetrating_before: usize,
+    /// See `penetrating_before`.
+    pub penetrating_after: usize,
+    /// Least signed distance of a vertex, before and after.
+    pub min_clearance_before: f64,
+    /// See `min_clearance_before`.
+    pub min_clearance_after: f64,
+    /// Signed distance of every vertex to the body, before.
+    pub clearance_before: Vec<f64>,
+    /// And after.
+    pub clearance_after: Vec<f64>,
+}
+
+/// The figures of a `perturb` run.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Summary {
+    /// The algorithm that ran.
+    pub method: Method,
+    /// ϖ_max within the tolerance.
+    pub converged: bool,
+    /// Why it stopped (`tolerance`, `stall`, `max_outer`).
+    pub stop_reason: Stop,
+    /// Outer iterations run.
+    pub iterations: usize,
+    /// The outer iteration whose positions are returned (0: the input).
+    pub best_iteration: usize,
+    /// Vertices popped from the heap over the run.
+    pub centres: usize,
+    /// ϖ_max of the input.
+    pub max_flattenability_before: f64,
+    /// ϖ_max of the output.
+    pub max_flattenability_after: f64,
+    /// Vertices that moved.
+    pub moved_vertices: usize,
+    /// Largest displacement of a vertex.
+    pub max_displacement: f64,
+    /// Displacement of every vertex.
+    pub displacement: Vec<f64>,
+    /// Against the reference body, when one was given.
+    pub body: Option<BodyFigures>,
+    /// Hausdorff distance between output and input.
+    pub hausdorff_to_input: Distance,
+    /// One entry per outer iteration.
+    pub history: Vec<HistoryEntry>,
+    /// What was assumed about the body.
+    pub warnings: Vec<String>,
+}
+
+/// Run `perturb` on `mesh`, keeping clear of `reference` when given.
+pub fn run(
+    mesh: &Mesh,
+    reference: Option<&Mesh>,
+    params: &Params,
+    control: &dyn Control,
+) -> Result<Outcome<Summary>, AlgoError> {
+    params.check()?;
+    let mut warnings = Vec::new();
+    let body = reference.map(|r| {
+        let (b, w) = Body::new(r);
+        warnings.extend(w);
+        if !boxes_overlap(mesh, r) {
+            warnings.push(
+                "reference body: its bounding box does not overlap the mesh's; it constrains \
+                 nothing (a different unit or frame?)"
+                    .into(),
+            );
+        }
+        b
+    });
+    let run = match params.method {
+        Method::Local => local::run(mesh, body.as_ref(), params, control)?,
+    };
+    let out = mesh
+        .with_positions(run.positions)
+        .map_err(|e| AlgoError::Input(format!("the perturbed mesh is invalid: {e}")))?;
+    let displacement: Vec<f64> = mesh
+        .positions()
+        .iter()
+        .zip(out.positions())
+        .map(|(&a, &b)| {
+            let d = crate::mesh::sub(a, b);
+            crate::mesh::dot(d, d).sqrt()
+        })
+        .collect();
+    let body_figures = body.as_ref().map(|b| {
+        let before: Vec<f64> = mesh
+            .positions()
+            .iter()
+            .map(|&p| b.clearance(p).signed)
+            .collect();
+        let after: Vec<f64> = out
+            .positions()
+            .iter()
+            .map(|&p| b.clearance(p).signed)
+            .collect();
+        let min = |v: &[f64]| v.iter().copied().fold(f64::INFINITY, f64::min);
+        BodyFigures {
+            clearance: params.clearance,
+            penetrating_before: before.iter().filter(|&&s| s < 0.0).count(),
+            penetrating_after: after.iter().filter(|&&s| s < 0.0).count(),
+            min_clearance_before: min(&before),
+            min_clearance_after: min(&after),
+            clearance_before: before,
+            clearance_after: after,
+        }
+    });
+    let hausdorff_to_input = Distance::hausdorff(&out, mesh);
+    let (_, before) = local::varpi(mesh, mesh.positions());
+    let summary = Summary {
+        method: params.method,
+        converged: run.max_flattenability <= params.tolerance,
+        stop_reason: run.stop,
+        iterations: run.iterations,
+        best_iteration: run.best_iteration,
+        centres: run.centres,
+        max_flattenability_before: before,
+        max_flattenability_after: run.max_flattenability,
+        moved_vertices: displacement.iter().filter(|&&d| d > 0.0).count(),
+        max_displacement: displacement.iter().copied().fold(0.0, f64::max),
+        displacement,
+        body: body_figures,
+        hausdorff_to_input,
+        history: run.history,
+        warnings,
+    };
+    Ok(Outcome {
+        mesh: Some(out),
+        patterns: None,
+        summary,
+        levels: Vec::new(),
+    })
+}
+
+/// Whether the bounding boxes of `a` and `b` overlap.
+fn boxes_overlap(a: &Mesh, b: &Mesh) -> bool {
+    let ((alo, ahi), (blo, bhi)) = (a.bbox(), b.bbox());
+    (0..3).all(|k| alo[k] <= bhi[k] && blo[k] <= ahi[k])
+}

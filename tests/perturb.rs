@@ -1,0 +1,331 @@
+//! `perturb` (FL Sec. 4, Algorithm 2), checked with independent truths: a dense solve of the
+//! KKT system Eq. 22, ϖ recomputed from corner angles, brute-force closest points on the body.
+
+use faer::linalg::solvers::Solve;
+use flatmesh::algorithms::perturb::{self, min_norm_step, Params};
+use flatmesh::algorithms::Silent;
+use flatmesh::geometry::{angle_sums, flattenability};
+use flatmesh::mesh::{Mesh, RawMesh};
+use flatmesh::spatial::closest_point_on_triangle;
+use proptest::prelude::*;
+
+fn mesh(positions: Vec<[f64; 3]>, triangles: Vec<[u32; 3]>) -> Mesh {
+    let raw = RawMesh {
+        face_patch: vec![0; triangles.len()],
+        positions,
+        triangles,
+        patch_names: vec!["p".into()],
+        uv: None,
+    };
+    Mesh::new(raw).unwrap().0
+}
+
+fn load(name: &str) -> Mesh {
+    let bytes = std::fs::read(format!("fixtures/{name}.obj")).unwrap();
+    flatmesh::io::load(&bytes, flatmesh::io::Format::Obj)
+        .unwrap()
+        .0
+}
+
+/// ϖ_max recomputed from the corner angles.
+fn varpi_max(m: &Mesh) -> f64 {
+    flattenability(m, &angle_sums(m))
+        .into_iter()
+        .fold(0.0, f64::max)
+}
+
+/// An n×m grid over [0,1]², z from `f`.
+fn grid(n: usize, f: impl Fn(f64, f64, usize) -> f64) -> Mesh {
+    let mut p = Vec::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            let (x, y) = (i as f64 / n as f64, j as f64 / n as f64);
+            p.push([x, y, f(x, y, p.len())]);
+        }
+    }
+    let mut t = Vec::new();
+    for j in 0..n {
+        for i in 0..n {
+            let a = (j * (n + 1) + i) as u32;
+            let (b, c, d) = (a + 1, a + n as u32 + 1, a + n as u32 + 2);
+            t.push([a, b, d]);
+            t.push([a, d, c]);
+        }
+    }
+    mesh(p, t)
+}
+
+fn run(m: &Mesh, body: Option<&Mesh>, p: &Params) -> (Mesh, perturb::Summary) {
+    let o = perturb::run(m, body, p, &Silent::default()).unwrap();
+    (o.mesh.unwrap(), o.summary)
+}
+
+/// Eq. 22 solved as the whole KKT system [[I, Λᵀ], [Λ, 0]] by a dense LU with full pivoting:
+/// the SVD-based step must agree, and satisfy Λδ = B_λ.
+#[test]
+fn local_step_is_the_kkt_solution() {
+    let mut seed = 7u64;
+    let mut rnd = || {
+        seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+    };
+    for (m, n) in [(5, 12), (20, 33), (1, 3), (30, 30)] {
+        let lam = faer::Mat::<f64>::from_fn(m, n, |_, _| rnd());
+        let bp: Vec<f64> = (0..n).map(|_| rnd()).collect();
+        let bl: Vec<f64> = (0..m).map(|_| rnd()).collect();
+        let (delta, mult) = min_norm_step(&lam, &bp, &bl);
+        let k = faer::Mat::<f64>::from_fn(n + m, n + m, |i, j| match (i < n, j < n) {
+            (true, true) => f64::from(u8::from(i == j)),
+            (true, false) => lam[(j - n, i)],
+            (false, true) => lam[(i - n, j)],
+            (false, false) => 0.0,
+        });
+        let rhs = faer::Mat::<f64>::from_fn(n + m, 1, |i, _| if i < n { bp[i] } else { bl[i - n] });
+        let x = k.full_piv_lu().solve(&rhs);
+        for i in 0..n {
+            assert!((x[(i, 0)] - delta[i]).abs() < 1e-9, "{m}x{n} δ[{i}]");
+        }
+        for i in 0..m {
+            assert!((x[(n + i, 0)] - mult[i]).abs() < 1e-8, "{m}x{n} λ[{i}]");
+            let r: f64 = (0..n).map(|j| lam[(i, j)] * delta[j]).sum();
+            assert!((r - bl[i]).abs() < 1e-10, "{m}x{n}: Λδ = B_λ row {i}");
+        }
+    }
+}
+
+#[test]
+fn within_tolerance_comes_back_bit_identical() {
+    let m = load("cylinder");
+    let (out, s) = run(&m, None, &Params::default());
+    assert_eq!(out.positions(), m.positions());
+    assert_eq!(s.iterations, 0);
+    assert!(s.converged);
+    assert_eq!(s.moved_vertices, 0);
+}
+
+/// FL Sec. 4 sanity (paper-notes A.6 item 8): the noisy cylinder reaches ϖ_max < 1e-3 without
+/// a body; boundary vertices never move.
+#[test]
+fn noisy_cylinder_without_body() {
+    let m = load("cylinder_noisy");
+    let before = varpi_max(&m);
+    let (out, s) = run(&m, None, &Params::default());
+    let after = varpi_max(&out);
+    eprintln!(
+        "cylinder_noisy: ϖ_max {before:.3e} -> {after:.3e}, {s:?}",
+        s = s.stop_reason
+    );
+    assert!(after <= before);
+    assert!((after - s.max_flattenability_after).abs() < 1e-12);
+    assert!(
+        after < 1e-3,
+        "{after} after {} outer iterations",
+        s.iterations
+    );
+    for v in 0..m.num_vertices() as u32 {
+        if !m.conn().is_interior(v) {
+            assert_eq!(out.position(v), m.position(v), "boundary vertex {v} moved");
+        }
+    }
+}
+
+/// Two bumps far apart on a plane: only vertices near them move (locality).
+#[test]
+fn only_vertices_near_the_bumps_move() {
+    let n = 40;
+    let bump = |x: f64, y: f64, cx: f64, cy: f64| {
+        let r2 = ((x - cx).powi(2) + (y - cy).powi(2)) * 400.0;
+        0.01 * (-r2).exp()
+    };
+    let m = grid(n, |x, y, _| bump(x, y, 0.25, 0.25) + bump(x, y, 0.75, 0.75));
+    let p = Params::default();
+    let (out, s) = run(&m, None, &p);
+    assert!(s.max_flattenability_after <= s.max_flattenability_before);
+    assert!(s.moved_vertices > 0, "{s:?}");
+    let h = 1.0 / n as f64;
+    // Where the bumps are non-flat (ϖ > 1e-9) the mesh may change within a generous margin of
+    // rings; farther away not a bit.
+    let w = flattenability(&m, &angle_sums(&m));
+    let hot: Vec<[f64; 3]> = (0..m.num_vertices())
+        .filter(|&v| w[v] > 1e-9)
+        .map(|v| m.positions()[v])
+        .collect();
+    let margin = 3.0 * (p.rings as f64 + 1.0) * h * std::f64::consts::SQRT_2;
+    for v in 0..m.num_vertices() {
+        let q = m.positions()[v];
+        let far = hot
+            .iter()
+            .all(|a| ((a[0] - q[0]).powi(2) + (a[1] - q[1]).powi(2)).sqrt() > margin);
+        if far {
+            assert_eq!(out.positions()[v], q, "far vertex {v} moved");
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(12))]
+    /// Never worse: on noisy grids ϖ_max(out) ≤ ϖ_max(in), boundary bit-identical.
+    #[test]
+    fn never_worse_on_noisy_grids(n in 4usize..12, amp in 0.0f64..0.05, seed in 0u64..1000) {
+        let m = grid(n, |x, y, i| {
+            let s = (seed as f64 + i as f64 * 12.9898).sin() * 43758.5453;
+            amp * (s - s.floor() - 0.5) + 0.1 * x * y
+        });
+        let p = Params { max_outer: 8, ..Params::default() };
+        let (out, s) = run(&m, None, &p);
+        prop_assert!(varpi_max(&out) <= varpi_max(&m) + 1e-15);
+        prop_assert_eq!(s.iterations == 0, varpi_max(&m) <= p.tolerance);
+        for v in 0..m.num_vertices() as u32 {
+            if !m.conn().is_interior(v) {
+                prop_assert_eq!(out.position(v), m.position(v));
+            }
+        }
+    }
+}
+
+/// Brute-force signed distance to a closed body: closest point over every triangle, sign by
+/// the winding number (independent of the pseudo-normals the algorithm uses).
+fn brute_signed(body: &Mesh, p: [f64; 3]) -> f64 {
+    let mut best = f64::INFINITY;
+    let mut solid = 0.0;
+    for t in body.triangles() {
+        let [a, b, c] = t.map(|v| body.position(v));
+        let q = closest_point_on_triangle(p, a, b, c);
+        best = best
+            .min(((q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2) + (q[2] - p[2]).powi(2)).sqrt());
+        // Van Oosterom–Strackee solid angle.
+        let (ra, rb, rc) = (
+            [a[0] - p[0], a[1] - p[1], a[2] - p[2]],
+            [b[0] - p[0], b[1] - p[1], b[2] - p[2]],
+            [c[0] - p[0], c[1] - p[1], c[2] - p[2]],
+        );
+        let n = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        let d = |u: [f64; 3], v: [f64; 3]| u[0] * v[0] + u[1] * v[1] + u[2] * v[2];
+        let cr = [
+            rb[1] * rc[2] - rb[2] * rc[1],
+            rb[2] * rc[0] - rb[0] * rc[2],
+            rb[0] * rc[1] - rb[1] * rc[0],
+        ];
+        let num = d(ra, cr);
+        let den = n(ra) * n(rb) * n(rc) + d(ra, rb) * n(rc) + d(ra, rc) * n(rb) + d(rb, rc) * n(ra);
+        solid += 2.0 * num.atan2(den);
+    }
+    let inside = solid / (4.0 * std::f64::consts::PI) > 0.5;
+    if inside {
+        -best
+    } else {
+        best
+    }
+}
+
+/// A closed capsule-like body: a cylinder of radius `r` along z over [0, len], capped by fans.
+fn arm(r: f64, len: f64, around: usize, along: usize) -> Mesh {
+    let mut p = Vec::new();
+    for j in 0..=along {
+        for i in 0..around {
+            let a = i as f64 / around as f64 * std::f64::consts::TAU;
+            p.push([r * a.cos(), r * a.sin(), len * j as f64 / along as f64]);
+        }
+    }
+    let bottom = p.len() as u32;
+    p.push([0.0, 0.0, -r]);
+    let top = p.len() as u32;
+    p.push([0.0, 0.0, len + r]);
+    let mut t = Vec::new();
+    let id = |i: usize, j: usize| (j * around + i % around) as u32;
+    for j in 0..along {
+        for i in 0..around {
+            t.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+            t.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+        }
+    }
+    for i in 0..around {
+        t.push([bottom, id(i + 1, 0), id(i, 0)]);
+        t.push([top, id(i, along), id(i + 1, along)]);
+    }
+    mesh(p, t)
+}
+
+/// An open sleeve of radius `r` along z over [0.1, len−0.1], with dents pushed inwards.
+fn sleeve(r: f64, len: f64, around: usize, along: usize, dent: f64) -> Mesh {
+    let mut p = Vec::new();
+    for j in 0..=along {
+        for i in 0..around {
+            let a = i as f64 / around as f64 * std::f64::consts::TAU;
+            let z = 0.1 + (len - 0.2) * j as f64 / along as f64;
+            let dz = ((z - len / 2.0) * 6.0).powi(2);
+            let da = (a - 1.0).powi(2) * 4.0;
+            let rr = r - dent * (-(dz + da)).exp();
+            p.push([rr * a.cos(), rr * a.sin(), z]);
+        }
+    }
+    let mut t = Vec::new();
+    let id = |i: usize, j: usize| (j * around + i % around) as u32;
+    for j in 0..along {
+        for i in 0..around {
+            t.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+            t.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+        }
+    }
+    mesh(p, t)
+}
+
+/// The sleeve around a slightly thinner arm: with clearance c every vertex that started at
+/// ≥ c ends at ≥ c − 1e-9·h̄ (brute-force distance), penetrating vertices never increase.
+#[test]
+fn sleeve_stays_clear_of_the_arm() {
+    let body = arm(0.3, 2.0, 48, 40);
+    let garment = sleeve(0.32, 2.0, 36, 30, 0.04);
+    let h = flatmesh::geometry::mean_edge_length(&garment);
+    for clearance in [0.0, 0.01] {
+        let p = Params {
+            clearance,
+            ..Params::default()
+        };
+        let (out, s) = run(&garment, Some(&body), &p);
+        let fig = s.body.as_ref().unwrap();
+        let (mut pen_in, mut pen_out) = (0, 0);
+        let mut started_clear = 0;
+        for v in 0..garment.num_vertices() as u32 {
+            let a = brute_signed(&body, garment.position(v));
+            let b = brute_signed(&body, out.position(v));
+            assert!(
+                (a - fig.clearance_before[v as usize]).abs() < 1e-12,
+                "vertex {v} before"
+            );
+            assert!(
+                (b - fig.clearance_after[v as usize]).abs() < 1e-12,
+                "vertex {v} after"
+            );
+            pen_in += usize::from(a < 0.0);
+            pen_out += usize::from(b < 0.0);
+            if a >= clearance {
+                started_clear += 1;
+                assert!(
+                    b >= clearance - 1e-9 * h,
+                    "c={clearance}: vertex {v} {a} -> {b}"
+                );
+            }
+        }
+        eprintln!(
+            "c={clearance}: ϖ_max {:.3e} -> {:.3e} ({}, {} outer), penetrating {pen_in} -> {pen_out}, \
+             min clearance {:.4} -> {:.4}, moved {}",
+            s.max_flattenability_before,
+            s.max_flattenability_after,
+            s.stop_reason.as_str(),
+            s.iterations,
+            fig.min_clearance_before,
+            fig.min_clearance_after,
+            s.moved_vertices
+        );
+        assert!(started_clear > garment.num_vertices() / 2);
+        assert!(pen_out <= pen_in);
+        assert!(s.max_flattenability_after <= s.max_flattenability_before);
+        assert!(
+            s.max_flattenability_after < s.max_flattenability_before,
+            "improved"
+        );
+    }
+}
