@@ -99,10 +99,15 @@
 // Index loops over xyz and rows read like the equations they implement.
 #![allow(clippy::needless_range_loop)]
 
+mod contact;
+
+pub use contact::{Keep, Obstacle};
+
 use super::{AlgoError, Control, Outcome, Progress};
 use crate::geometry::{corner_angle, corner_angle_gradient};
 use crate::linalg::{LdltSolver, LinalgError, LuSolver};
 use crate::mesh::{cross, dot, sub, Mesh, RawMesh, VertexKind, NONE};
+use contact::Contact;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::{PI, TAU};
 
@@ -388,8 +393,19 @@ pub fn solve(
     params: &Params,
     control: &dyn Control,
 ) -> Result<(Mesh, Report), AlgoError> {
+    solve_clear_of(mesh, params, None, control)
+}
+
+/// [`solve`], with every free vertex kept at least `keep.clearance` outside `keep.obstacle`
+/// (one that starts closer never ends closer than it started): see the `contact` module.
+pub fn solve_clear_of(
+    mesh: &Mesh,
+    params: &Params,
+    keep: Option<Keep<'_>>,
+    control: &dyn Control,
+) -> Result<(Mesh, Report), AlgoError> {
     params.check()?;
-    let (out, first) = solve_phase(mesh, params, control)?;
+    let (out, first) = solve_phase(mesh, params, keep, control)?;
     let remaining = params.max_iterations.saturating_sub(first.iterations);
     if first.converged || params.shape_penalty == 0.0 || remaining == 0 || first.free_vertices == 0
     {
@@ -400,7 +416,7 @@ pub fn solve(
         max_iterations: remaining,
         ..params.clone()
     };
-    let (out2, second) = solve_phase(mesh, &plain, &Renamed(control))?;
+    let (out2, second) = solve_phase(mesh, &plain, keep, &Renamed(control))?;
     let offset = first.iterations;
     if second.converged {
         let mut history = first.history;
@@ -454,6 +470,7 @@ impl Control for Renamed<'_> {
 fn solve_phase(
     mesh: &Mesh,
     params: &Params,
+    keep: Option<Keep<'_>>,
     control: &dyn Control,
 ) -> Result<(Mesh, Report), AlgoError> {
     let mut report = Report::default();
@@ -467,12 +484,23 @@ fn solve_phase(
         Anchor::Input => None,
     };
     let mut anchors: Vec<[f64; 3]> = mesh.positions().to_vec();
+    // Per vertex, the least signed distance to the obstacle it may end at: min(c, where it
+    // started).
+    let mut floors: Vec<f64> = match keep {
+        Some(k) => mesh.positions().iter().map(|&p| k.floor_at(p)).collect(),
+        None => Vec::new(),
+    };
     let mut rounds = 0usize;
     // The best result over the refinement rounds: (ϖ_max, mesh, refined count, best iteration,
     // stationarity, free vertices). A round whose refinement did not lower ϖ_max is dropped.
     let mut best: Option<(f64, Mesh, usize, usize, f64, usize)> = None;
     loop {
-        let mut sys = System::new(&current, &impossible, params)?;
+        let mut sys = System::new(
+            &current,
+            &impossible,
+            params,
+            keep.map(|k| (k, &floors[..])),
+        )?;
         let round = Round {
             mesh: &current,
             grid: input_grid.as_ref(),
@@ -527,6 +555,9 @@ fn solve_phase(
                 let added = raw.positions[anchors.len()..].to_vec();
                 match Mesh::new(raw) {
                     Ok((refined, _)) => {
+                        if let Some(k) = keep {
+                            floors.extend(added.iter().map(|&p| k.floor_at(p)));
+                        }
                         anchors.extend(added);
                         report.refined.extend_from_slice(&chosen);
                         current = refined;
@@ -662,10 +693,15 @@ struct Round<'a> {
 }
 
 /// The KKT system of one mesh (fixed connectivity): pattern, symbolic LU, work arrays.
-struct System {
+struct System<'a> {
     /// Free vertices (interior, not in an impossible component), row r ↔ vertex free[r].
     free: Vec<u32>,
     n: usize,
+    /// Unknowns: x, y, z, λ per free vertex (4n), and with an obstacle one body multiplier
+    /// each (5n; row 4n + r, see `contact`).
+    dim: usize,
+    /// The obstacle's rows, when there is one.
+    contact: Option<Contact<'a>>,
     /// Per row r: slots slot_start[r]..slot_start[r+1] hold vertex q = free[r] first, then its
     /// ring counter-clockwise; `slot_col` is the row of that vertex (NONE when fixed).
     slot_start: Vec<usize>,
@@ -693,8 +729,10 @@ struct System {
     /// Step of a feasibility correction.
     correction: Vec<[f64; 3]>,
     stationarity: f64,
-    /// Where the (2,2) block's diagonal starts in `values`.
+    /// Where the (2,2) block's diagonal starts in `values`, and the body rows' entries (seven
+    /// per row: the gradient's three entries twice, below and above the diagonal, then it).
     reg_start: usize,
+    body_start: usize,
     /// Best iterate of the round by ϖ_max.
     best_pos: Vec<[f64; 3]>,
     best_wmax: f64,
@@ -726,6 +764,10 @@ struct System {
 }
 
 const REGULARISATION: f64 = 1e-10;
+/// Rounding allowance below a vertex's obstacle floor, in mean edge lengths.
+const CONTACT_SLACK: f64 = 1e-10;
+/// Rows within this many mean edge lengths above the clearance stay active once active.
+const CONTACT_BAND: f64 = 0.05;
 const MAX_REFINED_PER_ROUND: usize = 64;
 /// Most feasibility corrections per iteration (each one triangular solve with the same factor).
 const MAX_CORRECTIONS: usize = 4;
@@ -739,8 +781,13 @@ const MU_MAX: f64 = 1e8;
 /// Most tangential (fairness) movement per iteration, in mean edge lengths.
 const TANGENT_RADIUS: f64 = 0.5;
 
-impl System {
-    fn new(mesh: &Mesh, impossible: &[bool], params: &Params) -> Result<Self, AlgoError> {
+impl<'a> System<'a> {
+    fn new(
+        mesh: &Mesh,
+        impossible: &[bool],
+        params: &Params,
+        keep: Option<(Keep<'a>, &[f64])>,
+    ) -> Result<Self, AlgoError> {
         let conn = mesh.conn();
         let nv = mesh.num_vertices();
         let mut row = vec![NONE; nv];
@@ -810,6 +857,20 @@ impl System {
             entries.push((3 * n + r, 3 * n + r));
             values.push(-REGULARISATION);
         }
+        // Body rows (inactive: −μ_r = 0): the gradient's three entries then the diagonal.
+        let body_start = values.len();
+        let dim = if keep.is_some() { 5 * n } else { 4 * n };
+        if keep.is_some() {
+            for r in 0..n {
+                for c in 0..3 {
+                    entries.push((4 * n + r, c * n + r));
+                    entries.push((c * n + r, 4 * n + r));
+                    values.extend([0.0, 0.0]);
+                }
+                entries.push((4 * n + r, 4 * n + r));
+                values.push(-1.0);
+            }
+        }
         let h = crate::geometry::mean_edge_length(mesh);
         if !(h > 0.0 && h.is_finite()) {
             return Err(AlgoError::Input(
@@ -818,13 +879,13 @@ impl System {
         }
         let kkt = |e: crate::linalg::LinalgError| AlgoError::Input(format!("KKT system: {e}"));
         let lu = match params.linear_solver {
-            LinearSolver::Lu => Factor::Lu(Box::new(LuSolver::new(4 * n, &entries).map_err(kkt)?)),
+            LinearSolver::Lu => Factor::Lu(Box::new(LuSolver::new(dim, &entries).map_err(kkt)?)),
             LinearSolver::Ldlt => {
-                let signs = (0..4 * n).map(|i| if i < 3 * n { 1 } else { -1 }).collect();
-                // x, y, z and λ of a vertex share their couplings: order them as one.
-                let groups: Vec<u32> = (0..4 * n).map(|i| (i % n) as u32).collect();
+                let signs = (0..dim).map(|i| if i < 3 * n { 1 } else { -1 }).collect();
+                // x, y, z, λ (and μ) of a vertex share their couplings: order them as one.
+                let groups: Vec<u32> = (0..dim).map(|i| (i % n) as u32).collect();
                 Factor::Ldlt(Box::new(
-                    LdltSolver::new(4 * n, &entries, signs, Some(&groups)).map_err(kkt)?,
+                    LdltSolver::new(dim, &entries, signs, Some(&groups)).map_err(kkt)?,
                 ))
             }
         };
@@ -836,7 +897,12 @@ impl System {
         } else {
             (Vec::new(), Vec::new())
         };
+        let contact = keep
+            .map(|(k, floors)| Contact::new(k, &free, floors, mesh.positions(), CONTACT_SLACK * h));
         Ok(System {
+            dim,
+            contact,
+            body_start,
             free,
             n,
             slot_start,
@@ -852,7 +918,7 @@ impl System {
             trial_pos: mesh.positions().to_vec(),
             trial_theta: vec![0.0; n],
             trial_grad: vec![[0.0; 3]; ns],
-            rhs: vec![0.0; 8 * n],
+            rhs: vec![0.0; 2 * dim],
             force: vec![[0.0; 3]; n],
             correction: vec![[0.0; 3]; n],
             stationarity: 0.0,
@@ -1000,11 +1066,25 @@ impl System {
                 fair *= 0.5;
             }
             prev_wmax = wmax;
+            if let Some(ct) = &mut self.contact {
+                ct.choose(&self.pos, CONTACT_BAND * self.h);
+            }
             self.assemble(conn, anchors, params, mu);
-            let solved = self
+            let mut solved = self
                 .lu
                 .factor(&self.values)
                 .and_then(|_| self.lu.solve_two_in_place(&mut self.rhs));
+            // The obstacle's active set: drop rows that pull inwards, add predicted crossings.
+            for _ in 0..contact::ACTIVE_SET_ROUNDS {
+                if solved.is_err() || !self.revise_contact(fair) {
+                    break;
+                }
+                self.assemble(conn, anchors, params, mu);
+                solved = self
+                    .lu
+                    .factor(&self.values)
+                    .and_then(|_| self.lu.solve_two_in_place(&mut self.rhs));
+            }
             report.iterations += 1;
             if let Err(e) = solved {
                 if params.step_rule != StepRule::Fixed && mu < MU_MAX {
@@ -1020,7 +1100,7 @@ impl System {
             let mut tan_norm = 0.0f64;
             for r in 0..n {
                 dn[r] = [self.rhs[r], self.rhs[n + r], self.rhs[2 * n + r]];
-                let t = &self.rhs[4 * n..];
+                let t = &self.rhs[self.dim..];
                 dt[r] = [t[r], t[n + r], t[2 * n + r]];
                 let d = [0, 1, 2].map(|c| dn[r][c] + dt[r][c]);
                 step_norm = step_norm.max(dot(d, d).sqrt());
@@ -1212,18 +1292,20 @@ impl System {
                 }
             }
         }
+        let dim = self.dim;
         for (r, &v) in self.free.iter().enumerate() {
             let b = b_p(&self.pos, anchors, conn.ring_of(v), v, params);
             for c in 0..3 {
                 self.rhs[c * n + r] = 0.0;
-                self.rhs[4 * n + c * n + r] = b[c];
+                self.rhs[dim + c * n + r] = b[c];
             }
             self.rhs[3 * n + r] = h * (TAU - self.theta[r]);
-            self.rhs[7 * n + r] = 0.0;
+            self.rhs[dim + 3 * n + r] = 0.0;
         }
-        for v in &mut self.values[self.reg_start..] {
+        for v in &mut self.values[self.reg_start..self.body_start] {
             *v = -mu;
         }
+        self.fill_contact();
         self.shape_penalty(params.shape_penalty);
         for (r, f) in self.penalty_force.iter().enumerate() {
             for c in 0..3 {
@@ -1237,6 +1319,52 @@ impl System {
                 self.values[k] += self.penalty_diag[r as usize];
             }
         }
+    }
+
+    /// The obstacle's rows (see `contact`): an active row r is ∇s·δ_r − ε μ_r = c − s, an
+    /// inactive one −μ_r = 0; the tangential right-hand side is 0 in both, so the fairing part
+    /// of a step slides along an active constraint.
+    fn fill_contact(&mut self) {
+        let Some(ct) = &self.contact else {
+            return;
+        };
+        let (n, dim) = (self.n, self.dim);
+        for r in 0..n {
+            let k = self.body_start + 7 * r;
+            let (g, target, diag) = match ct.row(r) {
+                Some((g, target)) => (g, target, -REGULARISATION),
+                None => ([0.0; 3], 0.0, -1.0),
+            };
+            for c in 0..3 {
+                self.values[k + 2 * c] = g[c];
+                self.values[k + 2 * c + 1] = g[c];
+            }
+            self.values[k + 6] = diag;
+            self.rhs[4 * n + r] = target;
+            self.rhs[dim + 4 * n + r] = 0.0;
+        }
+    }
+
+    /// One round of the obstacle's active set after a solve (the full step: normal part plus
+    /// the tangential part as the merit rule first tries it). True when the set changed.
+    fn revise_contact(&mut self, fair: f64) -> bool {
+        let (n, dim) = (self.n, self.dim);
+        let Some(ct) = &mut self.contact else {
+            return false;
+        };
+        let t = &self.rhs[dim..];
+        let tan_norm = (0..n)
+            .map(|r| (t[r] * t[r] + t[n + r] * t[n + r] + t[2 * n + r] * t[2 * n + r]).sqrt())
+            .fold(0.0, f64::max)
+            / self.h;
+        let s = fair * (TANGENT_RADIUS / tan_norm.max(TANGENT_RADIUS));
+        let delta: Vec<[f64; 3]> = (0..n)
+            .map(|r| [0, 1, 2].map(|c| self.rhs[c * n + r] + s * t[c * n + r]))
+            .collect();
+        let mu: Vec<f64> = (0..n)
+            .map(|r| self.rhs[4 * n + r] + s * t[4 * n + r])
+            .collect();
+        ct.revise(&self.pos, &delta, &mu)
     }
 
     /// The shape penalty ½ κ h̄² (Σ (φ − φ⁰)₊² + Σ (α⁰ − α)₊²) at `pos`: its force −∇ into
@@ -1325,6 +1453,9 @@ impl System {
         std::mem::swap(&mut self.pos, &mut self.trial_pos);
         std::mem::swap(&mut self.theta, &mut self.trial_theta);
         std::mem::swap(&mut self.grad, &mut self.trial_grad);
+        if let Some(ct) = &mut self.contact {
+            ct.accept_trial();
+        }
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -1381,7 +1512,9 @@ impl System {
                 }
                 self.rhs[3 * n + r] = h * (TAU - self.theta[r]);
             }
-            if self.lu.solve_in_place(&mut self.rhs[..4 * n]).is_err() {
+            // Active obstacle rows hold still (to first order); inactive ones are −μ = 0.
+            self.rhs[4 * n..self.dim].fill(0.0);
+            if self.lu.solve_in_place(&mut self.rhs[..self.dim]).is_err() {
                 break;
             }
             let mut step = std::mem::take(&mut self.correction);
@@ -1395,9 +1528,7 @@ impl System {
             if !valid || c1.is_nan() || c1 > 0.5 * c0 {
                 break;
             }
-            std::mem::swap(&mut self.pos, &mut self.trial_pos);
-            std::mem::swap(&mut self.theta, &mut self.trial_theta);
-            std::mem::swap(&mut self.grad, &mut self.trial_grad);
+            self.accept_trial();
             (wmax, c0) = (w1, c1);
             taken += 1;
         }
@@ -1450,7 +1581,13 @@ impl System {
             &mut self.trial_theta,
             &mut self.trial_grad,
         );
-        self.trial_valid(tris)
+        if !self.trial_valid(tris) {
+            return false;
+        }
+        match &mut self.contact {
+            Some(ct) => ct.check_trial(&self.pos, &self.trial_pos),
+            None => true,
+        }
     }
 
     /// The shape guard on the trial: no triangle touching a free vertex degenerates, turns over
@@ -1852,7 +1989,7 @@ mod tests {
             ..Params::default()
         };
         let impossible = vec![false; mesh.num_vertices()];
-        let mut sys = System::new(&mesh, &impossible, &params).unwrap();
+        let mut sys = System::new(&mesh, &impossible, &params, None).unwrap();
         // Lift one vertex and slide it most of the way to a neighbour: its hinges bend past
         // the onset and some of its corners close below it.
         let v = sys.free[sys.n / 2];
@@ -1896,7 +2033,7 @@ mod tests {
             let force = sys.penalty_force[r as usize];
             for c in 0..3 {
                 let step = 1e-6 * sys.h;
-                let mut t = System::new(&mesh, &impossible, &params).unwrap();
+                let mut t = System::new(&mesh, &impossible, &params, None).unwrap();
                 t.pos.clone_from(&sys.pos);
                 t.pos[q as usize][c] += step;
                 let up = energy(&t);
@@ -1971,8 +2108,13 @@ mod tests {
             uv: None,
         };
         let mesh = Mesh::new(raw).unwrap().0;
-        let sys =
-            System::new(&mesh, &vec![false; mesh.num_vertices()], &Params::default()).unwrap();
+        let sys = System::new(
+            &mesh,
+            &vec![false; mesh.num_vertices()],
+            &Params::default(),
+            None,
+        )
+        .unwrap();
         let mut theta = vec![0.0; sys.n];
         let mut grad = vec![[0.0; 3]; sys.slot_vertex.len()];
         eval(

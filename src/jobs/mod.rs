@@ -88,8 +88,9 @@ impl Kind {
                  writes level_<k>.glb, .gltf and .obj for every level"
             }
             Kind::Perturb => {
-                "local flattenable perturbation (Sec. 4 of Wang's FL meshes): small moves around \
-                 the least flattenable vertices, never into the reference body"
+                "flattenable perturbation (Sec. 4 of Wang's FL meshes): the closest flattenable \
+                 mesh, never into the reference body (global: whole-mesh SQP; local: the \
+                 paper's Algorithm 2)"
             }
         }
     }
@@ -120,9 +121,12 @@ impl Kind {
                  (true), fl_mesh={...} (the fl-mesh parameters used on each level)"
             }
             Kind::Perturb => {
-                "method=local (local: Algorithm 2), rings (3), tau (0.1), inner_iterations (5), \
-                 heap_fraction (0.5), tolerance (1e-3 rad), stall_outer (10), max_outer (50), \
-                 clearance (0: least signed distance to the reference body, mesh units)"
+                "method=global|local (global; local: Algorithm 2), tolerance (1e-6 rad for \
+                 global, 1e-3 for local), clearance (0: least signed distance to the reference \
+                 body, mesh units), max_iterations (global: 300), stall_iterations (global: \
+                 40), fairing (global: 0), shape_penalty (global: 1), rings (local: 3), tau \
+                 (local: 0.1), inner_iterations (local: 5), heap_fraction (local: 0.5), \
+                 stall_outer (local: 10), max_outer (local: 50)"
             }
         }
     }

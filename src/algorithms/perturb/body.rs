@@ -22,6 +22,8 @@ pub struct Body {
     face_normal: Vec<[f64; 3]>,
     vertex_normal: Vec<[f64; 3]>,
     edge_normal: HashMap<(u32, u32), [f64; 3]>,
+    /// Every component closed (so the signed distance is 1-Lipschitz).
+    closed: bool,
 }
 
 /// What a query found.
@@ -104,6 +106,7 @@ impl Body {
                 face_normal,
                 vertex_normal,
                 edge_normal,
+                closed: open == 0,
             },
             warnings,
         )
@@ -152,6 +155,17 @@ impl Body {
                 self.vertex_normal[t[k] as usize]
             }
         }
+    }
+}
+
+/// The global method keeps vertices outside the body through fl-mesh's obstacle rows.
+impl crate::algorithms::fl_mesh::Obstacle for Body {
+    fn clearance(&self, p: [f64; 3]) -> (f64, [f64; 3]) {
+        let c = Body::clearance(self, p);
+        (c.signed, c.gradient)
+    }
+    fn is_closed(&self) -> bool {
+        self.closed
     }
 }
 

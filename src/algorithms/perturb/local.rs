@@ -2,7 +2,7 @@
 //! See the module doc of [`super`] for the choices made where the paper is vague.
 
 use super::body::Body;
-use super::{HistoryEntry, Params, Stop};
+use super::{HistoryEntry, Params, Run, Stop};
 use crate::algorithms::{AlgoError, Control, Progress};
 use crate::geometry::{angle_sum_with, theta_gradient_with};
 use crate::mesh::{Mesh, NONE};
@@ -10,17 +10,6 @@ use faer::Mat;
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 use std::f64::consts::TAU;
-
-/// What the local run reached.
-pub(super) struct LocalRun {
-    pub positions: Vec<[f64; 3]>,
-    pub iterations: usize,
-    pub best_iteration: usize,
-    pub centres: usize,
-    pub stop: Stop,
-    pub history: Vec<HistoryEntry>,
-    pub max_flattenability: f64,
-}
 
 /// Singular values below this fraction of the largest are treated as zero (paper-notes A.3
 /// item 10: the paper gives no cutoff).
@@ -163,7 +152,7 @@ pub(super) fn run(
     body: Option<&Body>,
     params: &Params,
     control: &dyn Control,
-) -> Result<LocalRun, AlgoError> {
+) -> Result<Run, AlgoError> {
     let anchor = mesh.positions();
     let h = crate::geometry::mean_edge_length(mesh).max(f64::MIN_POSITIVE);
     let floor = match body {
@@ -185,16 +174,17 @@ pub(super) fn run(
     let (mut w, start) = varpi(mesh, &pos); // l.1
     let mut best = start;
     let mut best_pos = pos.clone(); // l.2
-    let mut run = LocalRun {
+    let mut run = Run {
         positions: vec![],
         iterations: 0,
         best_iteration: 0,
         centres: 0,
         stop: Stop::Tolerance,
+        stop_detail: "within the tolerance".into(),
         history: vec![],
         max_flattenability: start,
     };
-    if start <= params.tolerance {
+    if start <= params.tolerance() {
         run.positions = best_pos;
         return Ok(run);
     }
@@ -250,7 +240,7 @@ pub(super) fn run(
             step_norm: None,
         });
         // l.19: the three terminal conditions.
-        let stop = if best <= params.tolerance {
+        let stop = if best <= params.tolerance() {
             Some(Stop::Tolerance)
         } else if since_best >= params.stall_outer {
             Some(Stop::Stall)
@@ -261,6 +251,14 @@ pub(super) fn run(
         };
         if let Some(s) = stop {
             run.stop = s;
+            run.stop_detail = match s {
+                Stop::Tolerance => "within the tolerance".into(),
+                Stop::Stall => format!(
+                    "no new best ϖ_max in {} outer iterations",
+                    params.stall_outer
+                ),
+                _ => format!("{} outer iterations", params.max_outer),
+            };
             break;
         }
     }

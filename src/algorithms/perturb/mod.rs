@@ -43,6 +43,7 @@
 //! popped centre's r-ring disk are never written.
 
 mod body;
+mod global;
 mod local;
 
 pub use body::{Body, Clearance};
@@ -56,16 +57,18 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Method {
-    /// Algorithm 2 of the paper.
+    /// Eq. 20 on the whole mesh by fl-mesh's SQP, to ϖ_max ≤ 1e-6 (see `global`).
     #[default]
+    Global,
+    /// Algorithm 2 of the paper.
     Local,
 }
 
-/// Parameters of `perturb` (defaults: the paper's).
+/// Parameters of `perturb` (`local`'s defaults are the paper's).
 #[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Params {
-    /// `local` (Algorithm 2).
+    /// `global` (default) or `local` (Algorithm 2).
     pub method: Method,
     /// Ring number r of the moved disk V_act (Eq. 18).
     pub rings: usize,
@@ -75,28 +78,41 @@ pub struct Params {
     pub inner_iterations: usize,
     /// Vertices are popped while their ϖ exceeds this fraction of the best ϖ_max.
     pub heap_fraction: f64,
-    /// Target ϖ_max in radians (the paper's ε).
-    pub tolerance: f64,
+    /// Target ϖ_max in radians; none: 1e-6 for `global`, the paper's ε = 1e-3 for `local`.
+    pub tolerance: Option<f64>,
     /// Outer iterations without a new best ϖ_max before stopping.
     pub stall_outer: usize,
     /// Most outer iterations.
     pub max_outer: usize,
     /// Least signed distance to the reference body, in mesh units (the paper's ϵ).
     pub clearance: f64,
+    /// `global`: most Newton iterations.
+    pub max_iterations: usize,
+    /// `global`: iterations without ϖ_max halving that end the run.
+    pub stall_iterations: usize,
+    /// `global`: weight of fl-mesh's fairness term J_fair against J_pos (0: J_pos alone, as
+    /// Eq. 20).
+    pub fairing: f64,
+    /// `global`: fl-mesh's shape penalty κ against new creases and slivers (0: none).
+    pub shape_penalty: f64,
 }
 
 impl Default for Params {
     fn default() -> Self {
         Params {
-            method: Method::Local,
+            method: Method::Global,
             rings: 3,
             tau: 0.1,
             inner_iterations: 5,
             heap_fraction: 0.5,
-            tolerance: 1e-3,
+            tolerance: None,
             stall_outer: 10,
             max_outer: 50,
             clearance: 0.0,
+            max_iterations: 300,
+            stall_iterations: 40,
+            fairing: 0.0,
+            shape_penalty: 1.0,
         }
     }
 }
@@ -109,6 +125,14 @@ fn bad(key: &str, message: &str) -> AlgoError {
 }
 
 impl Params {
+    /// The tolerance in force: the given one, else 1e-6 (`global`) or 1e-3 (`local`).
+    pub fn tolerance(&self) -> f64 {
+        self.tolerance.unwrap_or(match self.method {
+            Method::Global => crate::geometry::DEVELOPABLE_TOLERANCE,
+            Method::Local => 1e-3,
+        })
+    }
+
     /// Check ranges.
     pub fn check(&self) -> Result<(), AlgoError> {
         if !(1..=10).contains(&self.rings) {
@@ -123,8 +147,20 @@ impl Params {
         if !(0.0..1.0).contains(&self.heap_fraction) {
             return Err(bad("heap_fraction", "must be in [0, 1)"));
         }
-        if !(self.tolerance > 0.0 && self.tolerance.is_finite()) {
-            return Err(bad("tolerance", "must be positive"));
+        if !(self.tolerance() > 0.0 && self.tolerance() < 1.0) {
+            return Err(bad("tolerance", "must be in (0, 1) rad"));
+        }
+        if !(1..=100_000).contains(&self.max_iterations) {
+            return Err(bad("max_iterations", "must be in 1..=100000"));
+        }
+        if !(2..=1000).contains(&self.stall_iterations) {
+            return Err(bad("stall_iterations", "must be in 2..=1000"));
+        }
+        if !(self.fairing >= 0.0 && self.fairing.is_finite()) {
+            return Err(bad("fairing", "must be finite and ≥ 0"));
+        }
+        if !(self.shape_penalty >= 0.0 && self.shape_penalty.is_finite()) {
+            return Err(bad("shape_penalty", "must be finite and ≥ 0"));
         }
         if !(1..=10_000).contains(&self.stall_outer) {
             return Err(bad("stall_outer", "must be in 1..=10000"));
@@ -150,8 +186,10 @@ pub enum Stop {
     Tolerance,
     /// `stall_outer` outer iterations without a new best.
     Stall,
-    /// `max_outer` outer iterations.
+    /// `max_outer` outer iterations (`local`).
     MaxOuter,
+    /// `max_iterations` Newton iterations (`global`).
+    MaxIterations,
 }
 
 impl Stop {
@@ -161,21 +199,34 @@ impl Stop {
             Stop::Tolerance => "tolerance",
             Stop::Stall => "stall",
             Stop::MaxOuter => "max_outer",
+            Stop::MaxIterations => "max_iterations",
         }
     }
 }
 
-/// One outer iteration.
+/// One outer iteration (`local`) or Newton iteration (`global`).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct HistoryEntry {
-    /// Outer iteration (1-based).
+    /// Iteration (1-based).
     pub iteration: usize,
-    /// ϖ_max after it.
+    /// ϖ_max after it (`local`), before its step (`global`, as fl-mesh's history).
     pub max_flattenability: f64,
     /// Best ϖ_max so far.
     pub best: f64,
-    /// Vertices popped from the heap.
+    /// Vertices popped from the heap (0 for `global`).
     pub centres: usize,
+}
+
+/// What a method reached, before the figures are measured.
+pub(super) struct Run {
+    pub positions: Vec<[f64; 3]>,
+    pub iterations: usize,
+    pub best_iteration: usize,
+    pub centres: usize,
+    pub stop: Stop,
+    pub stop_detail: String,
+    pub history: Vec<HistoryEntry>,
+    pub max_flattenability: f64,
 }
 
 /// How the output sits against the reference body.
@@ -204,11 +255,13 @@ pub struct Summary {
     pub method: Method,
     /// ϖ_max within the tolerance.
     pub converged: bool,
-    /// Why it stopped (`tolerance`, `stall`, `max_outer`).
+    /// Why it stopped (`tolerance`, `stall`, `max_outer`, `max_iterations`).
     pub stop_reason: Stop,
-    /// Outer iterations run.
+    /// The stop in words (for `global`, fl-mesh's stop reason).
+    pub stop_detail: String,
+    /// Outer iterations (`local`) or Newton iterations (`global`) run.
     pub iterations: usize,
-    /// The outer iteration whose positions are returned (0: the input).
+    /// The iteration whose positions are returned (0: the input).
     pub best_iteration: usize,
     /// Vertices popped from the heap over the run.
     pub centres: usize,
@@ -254,6 +307,7 @@ pub fn run(
         b
     });
     let run = match params.method {
+        Method::Global => global::run(mesh, body.as_ref(), params, control)?,
         Method::Local => local::run(mesh, body.as_ref(), params, control)?,
     };
     let out = mesh
@@ -294,8 +348,9 @@ pub fn run(
     let (_, before) = local::varpi(mesh, mesh.positions());
     let summary = Summary {
         method: params.method,
-        converged: run.max_flattenability <= params.tolerance,
+        converged: run.max_flattenability <= params.tolerance(),
         stop_reason: run.stop,
+        stop_detail: run.stop_detail,
         iterations: run.iterations,
         best_iteration: run.best_iteration,
         centres: run.centres,
