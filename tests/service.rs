@@ -1179,7 +1179,7 @@ async fn api_keys() {
 async fn cancel_full_queue_time_limit() {
     let s = Server::start(&tmp("queue"), &["--workers", "1", "--max-queued", "1"]);
     let c = client();
-    let slow = upload(&c, &s, saddle_obj(250)).await;
+    let slow = upload(&c, &s, slow_obj()).await;
     let sid = slow["id"].as_str().unwrap();
     let params: Value = serde_json::from_str(SLOW).unwrap();
     let a = submit(
@@ -1283,7 +1283,7 @@ async fn cancel_full_queue_time_limit() {
 
     // time limit
     let s = Server::start(&tmp("limit"), &["--workers", "1", "--job-time-limit", "1s"]);
-    let slow = upload(&c, &s, saddle_obj(250)).await;
+    let slow = upload(&c, &s, slow_obj()).await;
     let j = submit(
         &c,
         &s,
@@ -1323,7 +1323,7 @@ async fn restart_loses_nothing() {
         .bytes()
         .await
         .unwrap();
-    let slow = upload(&c, &s, saddle_obj(250)).await;
+    let slow = upload(&c, &s, slow_obj()).await;
     let params: Value = serde_json::from_str(SLOW).unwrap();
     let run = submit(
         &c,
@@ -1864,7 +1864,7 @@ async fn two_processes_share_one_store() {
     let a = Server::start(&dir, &args);
     let c = client();
     let cyl = upload(&c, &a, fixture("cylinder")).await;
-    let saddle = upload(&c, &a, saddle_obj(250)).await;
+    let saddle = upload(&c, &a, slow_obj()).await;
     let slow: Value = serde_json::from_str(SLOW).unwrap();
     let slow_job = json!({"kind": "flatten", "mesh_id": saddle["id"], "params": slow});
     // a job that runs on A (B does not exist yet) is cancelled through B

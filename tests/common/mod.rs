@@ -102,6 +102,32 @@ pub fn saddle_obj(n: usize) -> Vec<u8> {
     s.into_bytes()
 }
 
+/// A long thin strip (3000 × 3 square cells, slightly curved) whose flatten with [`SLOW`] runs
+/// for minutes at a few ms per iteration: long enough to outlast any test's time limit on a fast
+/// machine (the 250² saddle used before finished its 100000 iterations in about 3 s, under the
+/// two-process test's 4 s limit), short per iteration so cancels and progress come promptly.
+pub fn slow_obj() -> Vec<u8> {
+    let (nx, ny, h) = (3000usize, 3usize, 0.001);
+    let mut s = String::new();
+    for j in 0..=ny {
+        for i in 0..=nx {
+            let (x, y) = (i as f64 * h, j as f64 * h);
+            s += &format!(
+                "v {x:.6} {y:.6} {:.6}\n",
+                0.03 * ((x - 1.5).powi(2) - y * y)
+            );
+        }
+    }
+    for j in 0..ny {
+        for i in 0..nx {
+            let a = j * (nx + 1) + i + 1;
+            let (b, c) = (a + 1, a + nx + 1);
+            s += &format!("f {a} {b} {}\nf {a} {} {c}\n", c + 1, c + 1);
+        }
+    }
+    s.into_bytes()
+}
+
 pub const SLOW: &str = r#"{"tolerance": 1e-300, "max_iterations": 100000}"#;
 
 // ---------------------------------------------------------------- openapi
