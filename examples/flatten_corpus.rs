@@ -16,37 +16,12 @@
 //! not have), largest relative boundary-edge error, area-weighted mean |ln(A2D/A3D)|, ϖ_max
 //! of the piece's interior.
 
-use flatmesh::algorithms::{fl_mesh, flatten, parse_params, Silent};
+use flatmesh::algorithms::{flatten, parse_params, Silent};
 use flatmesh::corpus;
 use flatmesh::corpus::pattern_checks::{
     area_distortion, boundary_crossings, boundary_length_error, edge_length_error, flipped,
 };
-use flatmesh::mesh::Mesh;
 use std::path::{Path, PathBuf};
-
-/// fl-mesh's output for `name`, from the cache or computed now.
-fn fl_meshed(name: &str, mesh: &Mesh, out: &Path) -> Option<(Mesh, bool)> {
-    let (obj, txt) = (
-        out.join(format!("{name}.fl.obj")),
-        out.join(format!("{name}.fl.txt")),
-    );
-    if let (Ok((m, _)), Ok(t)) = (flatmesh::io::load_path(&obj), std::fs::read_to_string(&txt)) {
-        return Some((m, t.trim() == "converged"));
-    }
-    let params = fl_mesh::Params::default();
-    match fl_mesh::solve(mesh, &params, &Silent::default()) {
-        Ok((m, _)) => {
-            let conv = corpus::max_flattenability(&m) <= params.tolerance;
-            let _ = std::fs::write(&obj, flatmesh::io::obj::write(&m.to_raw()));
-            let _ = std::fs::write(&txt, if conv { "converged" } else { "stalled" });
-            Some((m, conv))
-        }
-        Err(e) => {
-            println!("{name:<28} fl-mesh error: {e}");
-            None
-        }
-    }
-}
 
 fn main() {
     let mut filter = String::new();
@@ -99,7 +74,7 @@ fn main() {
         };
         let mut tag = "";
         if fl {
-            let Some((m, conv)) = fl_meshed(&case.name, &mesh, &out) else {
+            let Some((m, conv)) = corpus::fl_meshed_cached(&case.name, &mesh, &out) else {
                 continue;
             };
             mesh = m;

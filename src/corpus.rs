@@ -152,6 +152,148 @@ pub fn with_normal_noise(mesh: &Mesh, sigma: f64, seed: u64) -> Mesh {
         .expect("noise keeps the mesh valid")
 }
 
+/// An almost flattenable version of `mesh`: `count` smooth bumps along the vertex normals,
+/// each a Gaussian of height `amplitude` and radius `radius` (both in mean edge lengths)
+/// centred on an interior vertex picked with `seed`; other vertices stay bit-identical. The
+/// input the `perturb` job is made for (a garment that is flattenable but for a few spots).
+pub fn with_bumps(mesh: &Mesh, count: usize, amplitude: f64, radius: f64, seed: u64) -> Mesh {
+    let h = geometry::mean_edge_length(mesh);
+    let normals = geometry::vertex_normals(mesh);
+    let interior: Vec<u32> = mesh.conn().interior_vertices().collect();
+    if interior.is_empty() {
+        return mesh.clone();
+    }
+    let mut rng = SplitMix(seed);
+    let centres: Vec<[f64; 3]> = (0..count)
+        .map(|_| {
+            let k = ((rng.unit() * interior.len() as f64) as usize).min(interior.len() - 1);
+            mesh.position(interior[k])
+        })
+        .collect();
+    let mut pos = mesh.positions().to_vec();
+    let r2 = (radius * h).powi(2);
+    for &v in &interior {
+        let p = mesh.position(v);
+        let lift: f64 = centres
+            .iter()
+            .map(|c| (-dot(sub(p, *c), sub(p, *c)) / r2).exp())
+            .sum();
+        for c in 0..3 {
+            pos[v as usize][c] += amplitude * h * lift * normals[v as usize][c];
+        }
+    }
+    mesh.with_positions(pos).unwrap_or_else(|_| mesh.clone())
+}
+
+/// fl-mesh's output for the case `name` with default parameters and whether it converged,
+/// cached in `dir` as NAME.fl.obj and NAME.fl.txt (`converged` or `stalled`) so that corpus
+/// runs that start from it need not repeat it; None when fl-mesh refuses the mesh.
+pub fn fl_meshed_cached(name: &str, mesh: &Mesh, dir: &Path) -> Option<(Mesh, bool)> {
+    use crate::algorithms::{fl_mesh, Silent};
+    let (obj, txt) = (
+        dir.join(format!("{name}.fl.obj")),
+        dir.join(format!("{name}.fl.txt")),
+    );
+    if let (Ok((m, _)), Ok(t)) = (crate::io::load_path(&obj), std::fs::read_to_string(&txt)) {
+        return Some((m, t.trim() == "converged"));
+    }
+    let params = fl_mesh::Params::default();
+    let (m, _) = fl_mesh::solve(mesh, &params, &Silent::default()).ok()?;
+    let conv = max_flattenability(&m) <= params.tolerance;
+    let _ = std::fs::create_dir_all(dir);
+    let _ = std::fs::write(&obj, crate::io::obj::write(&m.to_raw()));
+    let _ = std::fs::write(&txt, if conv { "converged" } else { "stalled" });
+    Some((m, conv))
+}
+
+/// `perturb`'s procedural pair, a garment and the body it is worn on (tests and benchmarks).
+/// A closed capsule-like body: a cylinder of radius `r` along z over [0, len], capped by fans.
+pub fn arm(r: f64, len: f64, around: usize, along: usize) -> Mesh {
+    let mut p = Vec::new();
+    for j in 0..=along {
+        for i in 0..around {
+            let a = i as f64 / around as f64 * std::f64::consts::TAU;
+            p.push([r * a.cos(), r * a.sin(), len * j as f64 / along as f64]);
+        }
+    }
+    let bottom = p.len() as u32;
+    p.push([0.0, 0.0, -r]);
+    let top = p.len() as u32;
+    p.push([0.0, 0.0, len + r]);
+    let mut t = Vec::new();
+    let id = |i: usize, j: usize| (j * around + i % around) as u32;
+    for j in 0..along {
+        for i in 0..around {
+            t.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+            t.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+        }
+    }
+    for i in 0..around {
+        t.push([bottom, id(i + 1, 0), id(i, 0)]);
+        t.push([top, id(i, along), id(i + 1, along)]);
+    }
+    procedural_mesh(p, t)
+}
+
+/// An open sleeve of radius `r` along z over [0.1, len−0.1], with dents pushed inwards.
+pub fn sleeve(r: f64, len: f64, around: usize, along: usize, dent: f64) -> Mesh {
+    let mut p = Vec::new();
+    for j in 0..=along {
+        for i in 0..around {
+            let a = i as f64 / around as f64 * std::f64::consts::TAU;
+            let z = 0.1 + (len - 0.2) * j as f64 / along as f64;
+            let dz = ((z - len / 2.0) * 6.0).powi(2);
+            let da = (a - 1.0).powi(2) * 4.0;
+            let rr = r - dent * (-(dz + da)).exp();
+            p.push([rr * a.cos(), rr * a.sin(), z]);
+        }
+    }
+    let mut t = Vec::new();
+    let id = |i: usize, j: usize| (j * around + i % around) as u32;
+    for j in 0..along {
+        for i in 0..around {
+            t.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+            t.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+        }
+    }
+    procedural_mesh(p, t)
+}
+
+fn procedural_mesh(positions: Vec<[f64; 3]>, triangles: Vec<[u32; 3]>) -> Mesh {
+    let raw = RawMesh {
+        face_patch: vec![0; triangles.len()],
+        positions,
+        triangles,
+        patch_names: vec!["default".into()],
+        uv: None,
+    };
+    Mesh::new(raw).expect("a procedural mesh is valid").0
+}
+
+/// Signed distance from `p` to the closed surface `body` by brute force: the closest point over
+/// every triangle, the sign from the winding number (Van Oosterom–Strackee solid angles),
+/// negative inside. Independent of the pseudo-normals `perturb` uses; O(triangles) per query.
+pub fn brute_signed_distance(body: &Mesh, p: [f64; 3]) -> f64 {
+    let mut best = f64::INFINITY;
+    let mut solid = 0.0;
+    let norm = |v: [f64; 3]| dot(v, v).sqrt();
+    for t in body.triangles() {
+        let [a, b, c] = t.map(|v| body.position(v));
+        let q = crate::spatial::closest_point_on_triangle(p, a, b, c);
+        best = best.min(norm(sub(q, p)));
+        let (ra, rb, rc) = (sub(a, p), sub(b, p), sub(c, p));
+        let num = dot(ra, crate::mesh::cross(rb, rc));
+        let (la, lb, lc) = (norm(ra), norm(rb), norm(rc));
+        let den = la * lb * lc + dot(ra, rb) * lc + dot(ra, rc) * lb + dot(rb, rc) * la;
+        solid += 2.0 * num.atan2(den);
+    }
+    if solid / (4.0 * PI) > 0.5 {
+        -best
+    } else {
+        best
+    }
+}
+
 /// Where the shared meshes live, relative to the crate root.
 pub const SHARED_MESHES: &str = "../shared/meshes";
 

@@ -6,7 +6,6 @@ use flatmesh::algorithms::perturb::{self, min_norm_step, Method, Params};
 use flatmesh::algorithms::Silent;
 use flatmesh::geometry::{angle_sums, flattenability};
 use flatmesh::mesh::{Mesh, RawMesh};
-use flatmesh::spatial::closest_point_on_triangle;
 use proptest::prelude::*;
 
 fn mesh(positions: Vec<[f64; 3]>, triangles: Vec<[u32; 3]>) -> Mesh {
@@ -199,89 +198,10 @@ proptest! {
 /// Brute-force signed distance to a closed body: closest point over every triangle, sign by
 /// the winding number (independent of the pseudo-normals the algorithm uses).
 fn brute_signed(body: &Mesh, p: [f64; 3]) -> f64 {
-    let mut best = f64::INFINITY;
-    let mut solid = 0.0;
-    for t in body.triangles() {
-        let [a, b, c] = t.map(|v| body.position(v));
-        let q = closest_point_on_triangle(p, a, b, c);
-        best = best
-            .min(((q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2) + (q[2] - p[2]).powi(2)).sqrt());
-        // Van Oosterom–Strackee solid angle.
-        let (ra, rb, rc) = (
-            [a[0] - p[0], a[1] - p[1], a[2] - p[2]],
-            [b[0] - p[0], b[1] - p[1], b[2] - p[2]],
-            [c[0] - p[0], c[1] - p[1], c[2] - p[2]],
-        );
-        let n = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-        let d = |u: [f64; 3], v: [f64; 3]| u[0] * v[0] + u[1] * v[1] + u[2] * v[2];
-        let cr = [
-            rb[1] * rc[2] - rb[2] * rc[1],
-            rb[2] * rc[0] - rb[0] * rc[2],
-            rb[0] * rc[1] - rb[1] * rc[0],
-        ];
-        let num = d(ra, cr);
-        let den = n(ra) * n(rb) * n(rc) + d(ra, rb) * n(rc) + d(ra, rc) * n(rb) + d(rb, rc) * n(ra);
-        solid += 2.0 * num.atan2(den);
-    }
-    let inside = solid / (4.0 * std::f64::consts::PI) > 0.5;
-    if inside {
-        -best
-    } else {
-        best
-    }
+    flatmesh::corpus::brute_signed_distance(body, p)
 }
 
-/// A closed capsule-like body: a cylinder of radius `r` along z over [0, len], capped by fans.
-fn arm(r: f64, len: f64, around: usize, along: usize) -> Mesh {
-    let mut p = Vec::new();
-    for j in 0..=along {
-        for i in 0..around {
-            let a = i as f64 / around as f64 * std::f64::consts::TAU;
-            p.push([r * a.cos(), r * a.sin(), len * j as f64 / along as f64]);
-        }
-    }
-    let bottom = p.len() as u32;
-    p.push([0.0, 0.0, -r]);
-    let top = p.len() as u32;
-    p.push([0.0, 0.0, len + r]);
-    let mut t = Vec::new();
-    let id = |i: usize, j: usize| (j * around + i % around) as u32;
-    for j in 0..along {
-        for i in 0..around {
-            t.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-            t.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-        }
-    }
-    for i in 0..around {
-        t.push([bottom, id(i + 1, 0), id(i, 0)]);
-        t.push([top, id(i, along), id(i + 1, along)]);
-    }
-    mesh(p, t)
-}
-
-/// An open sleeve of radius `r` along z over [0.1, len−0.1], with dents pushed inwards.
-fn sleeve(r: f64, len: f64, around: usize, along: usize, dent: f64) -> Mesh {
-    let mut p = Vec::new();
-    for j in 0..=along {
-        for i in 0..around {
-            let a = i as f64 / around as f64 * std::f64::consts::TAU;
-            let z = 0.1 + (len - 0.2) * j as f64 / along as f64;
-            let dz = ((z - len / 2.0) * 6.0).powi(2);
-            let da = (a - 1.0).powi(2) * 4.0;
-            let rr = r - dent * (-(dz + da)).exp();
-            p.push([rr * a.cos(), rr * a.sin(), z]);
-        }
-    }
-    let mut t = Vec::new();
-    let id = |i: usize, j: usize| (j * around + i % around) as u32;
-    for j in 0..along {
-        for i in 0..around {
-            t.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-            t.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-        }
-    }
-    mesh(p, t)
-}
+use flatmesh::corpus::{arm, sleeve};
 
 /// The sleeve around a slightly thinner arm: with clearance c every vertex that started at
 /// ≥ c ends at ≥ c − 1e-9·h̄ (brute-force distance), penetrating vertices never increase.
@@ -349,6 +269,74 @@ fn sleeve_stays_clear_of_the_arm() {
             assert!(s.converged, "{}", s.stop_detail);
             assert!(varpi_max(&out) <= 1e-6);
             assert_eq!(pen_out, 0);
+        }
+    }
+}
+
+/// The real pair of the issue: the MakeHuman elegant suit on the female body it was made for
+/// (same frame). The raw suit is far from flattenable (ϖ_max 0.95), so neither method
+/// converges here within the budget; what is checked is the body guarantee on real data, by
+/// brute-force distances: with clearance c (0 and 5 mm), every vertex that started at ≥ c ends
+/// at ≥ c − 1e-9·h̄, penetrating vertices never increase, and ϖ_max never rises. (Convergence
+/// on almost flattenable garments against their bodies: examples/perturb_corpus.)
+#[test]
+fn elegant_suit_keeps_clear_of_the_female_body() {
+    use rayon::prelude::*;
+    let (Some(g), Some(b)) = (
+        flatmesh::corpus::shared_mesh_for_tests("garment/mh_female_elegantsuit01.obj"),
+        flatmesh::corpus::shared_mesh_for_tests("body/mh_female_generic.obj"),
+    ) else {
+        return;
+    };
+    let garment = flatmesh::io::load_path(&g).unwrap().0;
+    let body = flatmesh::io::load_path(&b).unwrap().0;
+    let h = flatmesh::geometry::mean_edge_length(&garment);
+    let signed = |m: &Mesh| -> Vec<f64> {
+        m.positions()
+            .par_iter()
+            .map(|&p| brute_signed(&body, p))
+            .collect()
+    };
+    let before = signed(&garment);
+    // The MakeHuman unit is the decimetre: 0.05 is 5 mm.
+    // `local` is left out: on this input no outer iteration beats the input (its best record
+    // is the input, so the check would hold vacuously); its guarantee is tested on the sleeve.
+    for (method, clearance) in [(Method::Global, 0.0), (Method::Global, 0.05)] {
+        let p = Params {
+            method,
+            clearance,
+            max_iterations: 40,
+            ..Params::default()
+        };
+        let (out, s) = run(&garment, Some(&body), &p);
+        let after = signed(&out);
+        let pen = |v: &[f64]| v.iter().filter(|&&s| s < 0.0).count();
+        eprintln!(
+            "elegantsuit {method:?} c={clearance}: ϖ_max {:.3e} -> {:.3e} in {} its ({}), \
+             penetrating {} -> {}, moved {}",
+            s.max_flattenability_before,
+            varpi_max(&out),
+            s.iterations,
+            s.stop_detail,
+            pen(&before),
+            pen(&after),
+            s.moved_vertices
+        );
+        assert!(
+            s.moved_vertices > 0,
+            "{method:?} c={clearance} moved nothing"
+        );
+        assert!(varpi_max(&out) <= varpi_max(&garment));
+        assert!(pen(&after) <= pen(&before));
+        for v in 0..garment.num_vertices() {
+            if before[v] >= clearance {
+                assert!(
+                    after[v] >= clearance - 1e-9 * h,
+                    "{method:?} c={clearance}: vertex {v} {} -> {}",
+                    before[v],
+                    after[v]
+                );
+            }
         }
     }
 }

@@ -19,8 +19,8 @@
 //! separate primitives stay connected along their seams. Within a space nothing is welded: an
 //! indexed file's own connectivity (a cut, say) is respected.
 //!
-//! Writing: one POSITION, NORMAL, `_FLATTENABILITY` and COLOR_0 accessor for all vertices,
-//! in the mesh's vertex order, and one primitive per patch with its own indices, so that a
+//! Writing: one POSITION, NORMAL, `_FLATTENABILITY` and COLOR_0 accessor for all vertices
+//! (and, for `perturb`, `_DISPLACEMENT`: a [`VertexScalar`]), in the mesh's vertex order, and one primitive per patch with its own indices, so that a
 //! written file reads back with the same vertex numbering and patches. glTF stores positions
 //! as f32; use OBJ when full f64 precision matters. The JSON is built with `serde_json` and the
 //! GLB container (a 12-byte header and two padded chunks) is written here, which keeps the
@@ -626,7 +626,22 @@ pub fn heat_color(varpi: f64) -> [f32; 3] {
 }
 
 /// Build the glTF JSON and the binary buffer.
-fn build(mesh: &Mesh, flattenability: Option<&[f64]>) -> (serde_json::Value, Vec<u8>) {
+/// A custom per-vertex scalar attribute (`_NAME`, f32), described in `asset.extras.flatmesh`.
+#[derive(Debug, Clone, Copy)]
+pub struct VertexScalar<'a> {
+    /// Attribute name; glTF requires custom ones to start with `_`.
+    pub attribute: &'a str,
+    /// What it measures, in words (with its unit).
+    pub quantity: &'a str,
+    /// One value per vertex.
+    pub values: &'a [f64],
+}
+
+fn build(
+    mesh: &Mesh,
+    flattenability: Option<&[f64]>,
+    scalars: &[VertexScalar<'_>],
+) -> (serde_json::Value, Vec<u8>) {
     use serde_json::json;
     let n = mesh.num_vertices();
     let conn = mesh.conn();
@@ -723,6 +738,17 @@ fn build(mesh: &Mesh, flattenability: Option<&[f64]>) -> (serde_json::Value, Vec
         attributes["COLOR_0"] = json!(accessors.len() - 1);
     }
 
+    for sc in scalars {
+        let values: Vec<f32> = (0..n)
+            .map(|i| sc.values.get(i).copied().unwrap_or(0.0))
+            .map(|x| if x.is_finite() { x as f32 } else { 0.0 })
+            .collect();
+        let v = push_view(&mut bin, &f32_bytes(&mut values.iter().copied()), 34962);
+        accessors
+            .push(json!({"bufferView": v, "componentType": 5126, "count": n, "type": "SCALAR"}));
+        attributes[sc.attribute] = json!(accessors.len() - 1);
+    }
+
     // One primitive per patch, all sharing the vertex accessors.
     let mut by_patch: Vec<Vec<u32>> = vec![Vec::new(); mesh.num_patches()];
     for (t, &p) in mesh.triangles().iter().zip(mesh.face_patch()) {
@@ -762,6 +788,9 @@ fn build(mesh: &Mesh, flattenability: Option<&[f64]>) -> (serde_json::Value, Vec
             }
         }});
     }
+    for sc in scalars {
+        asset["extras"]["flatmesh"]["attributes"][sc.attribute] = json!(sc.quantity);
+    }
     let root = json!({
         "asset": asset,
         "scene": 0,
@@ -779,7 +808,16 @@ fn build(mesh: &Mesh, flattenability: Option<&[f64]>) -> (serde_json::Value, Vec
 /// primitive's extras) and, when `flattenability` is given, `_FLATTENABILITY` and a COLOR_0
 /// heat map whose scale is stated in `asset.extras.flatmesh`.
 pub fn write_glb(mesh: &Mesh, flattenability: Option<&[f64]>) -> Vec<u8> {
-    let (root, bin) = build(mesh, flattenability);
+    write_glb_with(mesh, flattenability, &[])
+}
+
+/// [`write_glb`] with further per-vertex scalar attributes.
+pub fn write_glb_with(
+    mesh: &Mesh,
+    flattenability: Option<&[f64]>,
+    scalars: &[VertexScalar<'_>],
+) -> Vec<u8> {
+    let (root, bin) = build(mesh, flattenability, scalars);
     let mut json = serde_json::to_vec(&root).unwrap_or_default();
     while json.len() % 4 != 0 {
         json.push(b' ');
@@ -801,7 +839,16 @@ pub fn write_glb(mesh: &Mesh, flattenability: Option<&[f64]>) -> Vec<u8> {
 /// `.gltf` JSON with the buffer embedded as a base64 `data:` URI; same content as
 /// [`write_glb`].
 pub fn write_gltf(mesh: &Mesh, flattenability: Option<&[f64]>) -> Vec<u8> {
-    let (mut root, bin) = build(mesh, flattenability);
+    write_gltf_with(mesh, flattenability, &[])
+}
+
+/// [`write_gltf`] with further per-vertex scalar attributes.
+pub fn write_gltf_with(
+    mesh: &Mesh,
+    flattenability: Option<&[f64]>,
+    scalars: &[VertexScalar<'_>],
+) -> Vec<u8> {
+    let (mut root, bin) = build(mesh, flattenability, scalars);
     let uri = format!(
         "data:application/octet-stream;base64,{}",
         base64::engine::general_purpose::STANDARD.encode(&bin)

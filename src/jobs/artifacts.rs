@@ -108,7 +108,16 @@ pub fn render(
         media_type: "application/json",
         bytes: serde_json::to_vec_pretty(&value).unwrap_or_default(),
     }];
-    push_mesh(&mut out, "mesh", mesh, &varpi);
+    // `perturb`: how far each vertex moved, beside ϖ.
+    let displacement = match &outcome.figures {
+        super::Figures::Perturb(s) => Some(io::gltf::VertexScalar {
+            attribute: "_DISPLACEMENT",
+            quantity: "distance each vertex moved from the input, mesh units",
+            values: &s.displacement,
+        }),
+        _ => None,
+    };
+    push_mesh(&mut out, "mesh", mesh, &varpi, displacement.as_slice());
     if let Some(p) = &outcome.patterns {
         out.push(Artifact {
             name: "patterns.json".into(),
@@ -130,7 +139,7 @@ pub fn render(
     for (k, level) in outcome.levels.iter().enumerate() {
         let theta = crate::geometry::angle_sums(level);
         let varpi = crate::geometry::flattenability(level, &theta);
-        push_mesh(&mut out, &format!("level_{}", k + 1), level, &varpi);
+        push_mesh(&mut out, &format!("level_{}", k + 1), level, &varpi, &[]);
     }
     Rendered {
         artifacts: out,
@@ -139,16 +148,22 @@ pub fn render(
 }
 
 /// `stem.glb`, `stem.gltf` (both with ϖ per vertex) and `stem.obj`.
-fn push_mesh(out: &mut Vec<Artifact>, stem: &str, mesh: &Mesh, varpi: &[f64]) {
+fn push_mesh(
+    out: &mut Vec<Artifact>,
+    stem: &str,
+    mesh: &Mesh,
+    varpi: &[f64],
+    scalars: &[io::gltf::VertexScalar<'_>],
+) {
     out.push(Artifact {
         name: format!("{stem}.glb"),
         media_type: "model/gltf-binary",
-        bytes: io::gltf::write_glb(mesh, Some(varpi)),
+        bytes: io::gltf::write_glb_with(mesh, Some(varpi), scalars),
     });
     out.push(Artifact {
         name: format!("{stem}.gltf"),
         media_type: "model/gltf+json",
-        bytes: io::gltf::write_gltf(mesh, Some(varpi)),
+        bytes: io::gltf::write_gltf_with(mesh, Some(varpi), scalars),
     });
     out.push(Artifact {
         name: format!("{stem}.obj"),
