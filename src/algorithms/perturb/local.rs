@@ -18,6 +18,9 @@ const SVD_CUTOFF: f64 = 1e-3;
 /// Rounds of the active set of body rows in one inner iteration.
 const ACTIVE_SET_ROUNDS: usize = 8;
 
+/// Longest move of a vertex in one damped step, in mean edge lengths (beyond the paper).
+const STEP_CAP: f64 = 0.05;
+
 /// Step halvings tried when a damped step still takes a vertex below its floor.
 const HALVINGS: usize = 10;
 
@@ -378,7 +381,10 @@ fn inner_step(
         }
         // The damped step, checked against every vertex's floor with the exact distance.
         let mut violators = Vec::new();
-        let mut t = tau;
+        let longest = (0..act.len())
+            .map(|i| (0..3).map(|d| delta[3 * i + d].powi(2)).sum::<f64>().sqrt())
+            .fold(0.0, f64::max);
+        let mut t = tau.min(STEP_CAP * h / longest.max(f64::MIN_POSITIVE));
         for _ in 0..=HALVINGS {
             violators.clear();
             if let Some(body) = ctx.body {
