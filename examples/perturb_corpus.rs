@@ -17,7 +17,7 @@
 
 use flatmesh::algorithms::{perturb, Silent};
 use flatmesh::corpus;
-use flatmesh::mesh::Mesh;
+use flatmesh::mesh::{Mesh, VertexKind};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
@@ -92,6 +92,16 @@ fn main() {
         let Ok(mesh) = case.mesh() else {
             continue;
         };
+        // Garments are open: a closed body cannot be flattenable (Gauss–Bonnet).
+        let open = (0..mesh.num_vertices() as u32).any(|v| {
+            !matches!(
+                mesh.conn().kinds()[v as usize],
+                VertexKind::Interior | VertexKind::Unreferenced
+            )
+        });
+        if !open {
+            continue;
+        }
         let Some((fl, conv)) = corpus::fl_meshed_cached(&case.name, &mesh, &out) else {
             continue;
         };

@@ -152,10 +152,12 @@ pub fn with_normal_noise(mesh: &Mesh, sigma: f64, seed: u64) -> Mesh {
         .expect("noise keeps the mesh valid")
 }
 
-/// An almost flattenable version of `mesh`: `count` smooth bumps along the vertex normals,
-/// each a Gaussian of height `amplitude` and radius `radius` (both in mean edge lengths)
-/// centred on an interior vertex picked with `seed`; other vertices stay bit-identical. The
-/// input the `perturb` job is made for (a garment that is flattenable but for a few spots).
+/// An almost flattenable version of `mesh`: `count` smooth bumps, each a Gaussian of height
+/// `amplitude` and radius `radius` (both in mean edge lengths) centred on an interior vertex
+/// picked with `seed`, moving every interior vertex near it along the centre's normal (one
+/// direction per bump, so that the bump stays smooth across creases and slivers, where
+/// per-vertex normals are not); other vertices stay bit-identical. The input the `perturb`
+/// job is made for (a garment that is flattenable but for a few spots).
 pub fn with_bumps(mesh: &Mesh, count: usize, amplitude: f64, radius: f64, seed: u64) -> Mesh {
     let h = geometry::mean_edge_length(mesh);
     let normals = geometry::vertex_normals(mesh);
@@ -164,22 +166,22 @@ pub fn with_bumps(mesh: &Mesh, count: usize, amplitude: f64, radius: f64, seed: 
         return mesh.clone();
     }
     let mut rng = SplitMix(seed);
-    let centres: Vec<[f64; 3]> = (0..count)
+    let centres: Vec<([f64; 3], [f64; 3])> = (0..count)
         .map(|_| {
             let k = ((rng.unit() * interior.len() as f64) as usize).min(interior.len() - 1);
-            mesh.position(interior[k])
+            let v = interior[k];
+            (mesh.position(v), normals[v as usize])
         })
         .collect();
     let mut pos = mesh.positions().to_vec();
     let r2 = (radius * h).powi(2);
     for &v in &interior {
         let p = mesh.position(v);
-        let lift: f64 = centres
-            .iter()
-            .map(|c| (-dot(sub(p, *c), sub(p, *c)) / r2).exp())
-            .sum();
-        for c in 0..3 {
-            pos[v as usize][c] += amplitude * h * lift * normals[v as usize][c];
+        for (c, n) in &centres {
+            let lift = amplitude * h * (-dot(sub(p, *c), sub(p, *c)) / r2).exp();
+            for k in 0..3 {
+                pos[v as usize][k] += lift * n[k];
+            }
         }
     }
     mesh.with_positions(pos).unwrap_or_else(|_| mesh.clone())

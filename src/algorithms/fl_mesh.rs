@@ -87,6 +87,9 @@
 //!   refined.
 //!   After `max_refinements` rounds the run ends with `converged: false` and the stuck
 //!   vertices named.
+//! - Obstacle ([`solve_clear_of`], used by `perturb`'s global method): every free vertex kept
+//!   at least a clearance outside a body, one inequality row per vertex on the same fixed KKT
+//!   pattern with an active set, every trial checked with the exact distance (`contact`).
 //! - Closed components whose Euler characteristic χ ≠ 0 cannot become flattenable
 //!   (Gauss–Bonnet: the angle defects sum to 2πχ); their vertices are held fixed and reported
 //!   as stuck, and the run ends with `converged: false`.
@@ -1357,14 +1360,8 @@ impl<'a> System<'a> {
             .map(|r| (t[r] * t[r] + t[n + r] * t[n + r] + t[2 * n + r] * t[2 * n + r]).sqrt())
             .fold(0.0, f64::max)
             / self.h;
-        let s = fair * (TANGENT_RADIUS / tan_norm.max(TANGENT_RADIUS));
-        let delta: Vec<[f64; 3]> = (0..n)
-            .map(|r| [0, 1, 2].map(|c| self.rhs[c * n + r] + s * t[c * n + r]))
-            .collect();
-        let mu: Vec<f64> = (0..n)
-            .map(|r| self.rhs[4 * n + r] + s * t[4 * n + r])
-            .collect();
-        ct.revise(&self.pos, &delta, &mu)
+        let scale = fair * (TANGENT_RADIUS / tan_norm.max(TANGENT_RADIUS));
+        ct.revise(&self.pos, &self.rhs, dim, scale)
     }
 
     /// The shape penalty ½ κ h̄² (Σ (φ − φ⁰)₊² + Σ (α⁰ − α)₊²) at `pos`: its force −∇ into

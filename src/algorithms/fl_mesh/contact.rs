@@ -63,8 +63,6 @@ pub(super) struct Contact<'a> {
     refused: Vec<u32>,
     /// Rows activated that way for the current iteration: not dropped by `revise`.
     forced: Vec<bool>,
-    /// Exact distance queries made (for the report's measure of cost).
-    pub(super) queries: usize,
 }
 
 /// Rounds of dropping wrong-signed rows and adding predicted crossings per iteration.
@@ -94,7 +92,6 @@ impl<'a> Contact<'a> {
             active: vec![false; n],
             refused: Vec::new(),
             forced: vec![false; n],
-            queries: 0,
         };
         for r in 0..n {
             c.query(r, pos[free[r] as usize], false);
@@ -104,7 +101,6 @@ impl<'a> Contact<'a> {
 
     fn query(&mut self, r: usize, p: [f64; 3], trial: bool) {
         let (s, g) = self.keep.obstacle.clearance(p);
-        self.queries += 1;
         if trial {
             (self.trial_s[r], self.trial_grad[r], self.trial_exact[r]) = (s, g, true);
         } else {
@@ -118,7 +114,7 @@ impl<'a> Contact<'a> {
     pub(super) fn choose(&mut self, pos: &[[f64; 3]], band: f64) -> bool {
         let c = self.keep.clearance;
         self.forced.fill(false);
-        for r in std::mem::take(&mut self.refused) {
+        for r in self.refused.drain(..) {
             self.forced[r as usize] = true;
         }
         for r in 0..self.s.len() {
@@ -136,28 +132,32 @@ impl<'a> Contact<'a> {
         self.active[r].then(|| (self.grad[r], self.keep.clearance - self.s[r]))
     }
 
-    /// After a solve with step `delta` and body multipliers `lambda` (per row; `pos` per vertex): drop rows that
-    /// pull their vertex inwards (λ > 0) and add rows the full step is predicted to take below
-    /// the clearance. Returns whether the active set changed.
-    pub(super) fn revise(&mut self, pos: &[[f64; 3]], delta: &[[f64; 3]], lambda: &[f64]) -> bool {
+    /// After a solve (`rhs`: the normal then the tangential solution, `dim` unknowns each, rows
+    /// laid out as in fl-mesh's System), for the full step normal + `scale`·tangential: drop
+    /// rows whose multiplier pulls their vertex inwards (λ > 0) and add rows the step is
+    /// predicted to take below the clearance. `pos` per vertex. Whether the set changed.
+    pub(super) fn revise(&mut self, pos: &[[f64; 3]], rhs: &[f64], dim: usize, scale: f64) -> bool {
         let c = self.keep.clearance;
+        let n = self.s.len();
         let mut changed = false;
-        for r in 0..self.s.len() {
+        for r in 0..n {
             if self.active[r] {
-                if lambda[r] > 0.0 && !self.forced[r] {
+                let lambda = rhs[4 * n + r] + scale * rhs[dim + 4 * n + r];
+                if lambda > 0.0 && !self.forced[r] {
                     self.active[r] = false;
                     changed = true;
                 }
                 continue;
             }
-            let len = dot(delta[r], delta[r]).sqrt();
+            let delta = [0, 1, 2].map(|k| rhs[k * n + r] + scale * rhs[dim + k * n + r]);
+            let len = dot(delta, delta).sqrt();
             if self.s[r] - len >= c && self.exact_is_optional() {
                 continue;
             }
             if !self.exact[r] {
                 self.query(r, pos[self.free[r] as usize], false);
             }
-            if self.s[r] + dot(self.grad[r], delta[r]) < c {
+            if self.s[r] + dot(self.grad[r], delta) < c {
                 self.active[r] = true;
                 changed = true;
             }
