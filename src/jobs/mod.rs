@@ -313,7 +313,7 @@ impl Figures {
             Figures::Report(_) | Figures::Flatten(_) => &[],
             Figures::FlMesh(s) => &s.report.stuck_vertices,
             Figures::Subdivide(s) => &s.stuck_vertices,
-            Figures::Perturb(_) => &[],
+            Figures::Perturb(s) => &s.stuck_vertices,
         }
     }
 

@@ -284,6 +284,8 @@ pub struct Summary {
     pub max_flattenability_before: f64,
     /// ϖ_max of the output.
     pub max_flattenability_after: f64,
+    /// Interior vertices still above the tolerance, worst first.
+    pub stuck_vertices: Vec<u32>,
     /// Vertices that moved.
     pub moved_vertices: usize,
     /// Largest displacement of a vertex.
@@ -361,6 +363,11 @@ pub fn run(
     });
     let hausdorff_to_input = Distance::hausdorff(&out, mesh);
     let (_, before) = local::varpi(mesh, mesh.positions());
+    let (w, _) = local::varpi(&out, out.positions());
+    let mut stuck_vertices: Vec<u32> = (0..w.len() as u32)
+        .filter(|&v| w[v as usize] > params.tolerance())
+        .collect();
+    stuck_vertices.sort_by(|a, b| w[*b as usize].total_cmp(&w[*a as usize]));
     let summary = Summary {
         method: params.method,
         converged: run.max_flattenability <= params.tolerance(),
@@ -371,6 +378,7 @@ pub fn run(
         centres: run.centres,
         max_flattenability_before: before,
         max_flattenability_after: run.max_flattenability,
+        stuck_vertices,
         moved_vertices: displacement.iter().filter(|&&d| d > 0.0).count(),
         max_displacement: displacement.iter().copied().fold(0.0, f64::max),
         displacement,
