@@ -222,14 +222,8 @@ pub fn arm(r: f64, len: f64, around: usize, along: usize) -> Mesh {
     p.push([0.0, 0.0, -r]);
     let top = p.len() as u32;
     p.push([0.0, 0.0, len + r]);
-    let mut t = Vec::new();
+    let mut t = band_triangles(around, along);
     let id = |i: usize, j: usize| (j * around + i % around) as u32;
-    for j in 0..along {
-        for i in 0..around {
-            t.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-            t.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-        }
-    }
     for i in 0..around {
         t.push([bottom, id(i + 1, 0), id(i, 0)]);
         t.push([top, id(i, along), id(i + 1, along)]);
@@ -250,6 +244,12 @@ pub fn sleeve(r: f64, len: f64, around: usize, along: usize, dent: f64) -> Mesh 
             p.push([rr * a.cos(), rr * a.sin(), z]);
         }
     }
+    procedural_mesh(p, band_triangles(around, along))
+}
+
+/// The triangles of a band of `along` rows of `around` quads each, closed around (vertex
+/// i + j·around is the i-th of ring j).
+fn band_triangles(around: usize, along: usize) -> Vec<[u32; 3]> {
     let mut t = Vec::new();
     let id = |i: usize, j: usize| (j * around + i % around) as u32;
     for j in 0..along {
@@ -258,7 +258,7 @@ pub fn sleeve(r: f64, len: f64, around: usize, along: usize, dent: f64) -> Mesh 
             t.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
         }
     }
-    procedural_mesh(p, t)
+    t
 }
 
 fn procedural_mesh(positions: Vec<[f64; 3]>, triangles: Vec<[u32; 3]>) -> Mesh {

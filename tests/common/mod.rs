@@ -81,27 +81,6 @@ pub fn fixture(name: &str) -> Vec<u8> {
     std::fs::read(format!("fixtures/{name}.obj")).expect("fixture file")
 }
 
-/// A saddle z = 0.3(x² − y²) on an n×n grid: flattening it with a tolerance that cannot be
-/// reached keeps a worker busy for seconds, checking cancellation every iteration.
-pub fn saddle_obj(n: usize) -> Vec<u8> {
-    let mut s = String::new();
-    for j in 0..=n {
-        for i in 0..=n {
-            let x = i as f64 / n as f64 * 2.0 - 1.0;
-            let y = j as f64 / n as f64 * 2.0 - 1.0;
-            s += &format!("v {x:.6} {y:.6} {:.6}\n", 0.3 * (x * x - y * y));
-        }
-    }
-    for j in 0..n {
-        for i in 0..n {
-            let a = j * (n + 1) + i + 1;
-            let (b, c) = (a + 1, a + n + 1);
-            s += &format!("f {a} {b} {}\nf {a} {} {c}\n", c + 1, c + 1);
-        }
-    }
-    s.into_bytes()
-}
-
 /// A long thin strip (3000 × 3 square cells, slightly curved) whose flatten with [`SLOW`] runs
 /// for minutes at a few ms per iteration: long enough to outlast any test's time limit on a fast
 /// machine (the 250² saddle used before finished its 100000 iterations in about 3 s, under the
