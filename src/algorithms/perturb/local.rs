@@ -80,6 +80,29 @@ fn rings(mesh: &Mesh, c: u32, r: usize, mark: &mut [u32], stamp: u32) -> (Vec<u3
     (out, n_r)
 }
 
+/// Thin SVD Λ = U Σ Vᵀ on the calling thread: (U, the singular values, V).
+fn thin_svd_seq(lambda: &Mat<f64>) -> Option<(Mat<f64>, faer::Col<f64>, Mat<f64>)> {
+    use faer::linalg::svd::{svd, svd_scratch, ComputeSvdVectors};
+    let (m, n) = (lambda.nrows(), lambda.ncols());
+    let k = m.min(n);
+    let thin = ComputeSvdVectors::Thin;
+    let req = svd_scratch::<f64>(m, n, thin, thin, faer::Par::Seq, Default::default());
+    let mut mem = faer::dyn_stack::MemBuffer::try_new(req).ok()?;
+    let (mut u, mut v) = (Mat::<f64>::zeros(m, k), Mat::<f64>::zeros(n, k));
+    let mut s = faer::diag::Diag::<f64>::zeros(k);
+    svd(
+        lambda.as_ref(),
+        s.as_mut(),
+        Some(u.as_mut()),
+        Some(v.as_mut()),
+        faer::Par::Seq,
+        faer::dyn_stack::MemStack::new(&mut mem),
+        Default::default(),
+    )
+    .ok()?;
+    Some((u, s.column_vector().to_owned(), v))
+}
+
 /// The minimum-norm correction of Eq. 22–24: δ = B_p − Λᵀλ with Λδ = B_λ in the least-squares
 /// sense, through a thin SVD of Λ itself (Λ = U Σ Vᵀ: Λᵀλ = V Σ⁻¹ Uᵀ (Λ B_p − B_λ), and
 /// λ = U Σ⁻² Uᵀ (Λ B_p − B_λ)), singular values below [`SVD_CUTOFF`]·σ_max dropped. The
@@ -98,11 +121,13 @@ pub fn min_norm_step(lambda: &Mat<f64>, bp: &[f64], bl: &[f64]) -> (Vec<f64>, Ve
         }
         r[i] = s;
     }
-    let Ok(svd) = lambda.thin_svd() else {
+    // Sequential: on matrices this small faer's default (rayon) parallelism spent more time
+    // waking and parking its workers than computing (perf: 42 % of samples in idle rayon
+    // workers on benches/perturb's sleeve).
+    let Some((u, s, v)) = thin_svd_seq(lambda) else {
         // No decomposition (non-finite entries): no step.
         return (vec![0.0; n], vec![0.0; m]);
     };
-    let (u, s, v) = (svd.U(), svd.S().column_vector(), svd.V());
     let k = s.nrows();
     let smax = (0..k).map(|i| s[i].abs()).fold(0.0, f64::max);
     let mut z = vec![0.0; k];
