@@ -611,7 +611,27 @@ fn solve_phase(
     report
         .stuck_vertices
         .sort_by(|a, b| varpi[*b as usize].total_cmp(&varpi[*a as usize]));
-    let flat = report.max_flattenability <= params.tolerance;
+    let mut flat = report.max_flattenability <= params.tolerance;
+    if let (Some(k), true) = (keep, flat) {
+        let h = crate::geometry::mean_edge_length(&current);
+        let below: Vec<u32> = current
+            .conn()
+            .interior_vertices()
+            .filter(|&v| !impossible.get(v as usize).copied().unwrap_or(false))
+            .filter(|&v| {
+                k.obstacle.clearance(current.position(v)).0 < k.clearance - CONTACT_TOLERANCE * h
+            })
+            .collect();
+        if !below.is_empty() {
+            flat = false;
+            report.stop_reason = format!(
+                "{}; {} free vertices still closer to the obstacle than the clearance (e.g. {})",
+                report.stop_reason,
+                below.len(),
+                below[0]
+            );
+        }
+    }
     report.converged = flat
         && match params.until {
             Until::Flattenable => true,
@@ -769,6 +789,9 @@ struct System<'a> {
 const REGULARISATION: f64 = 1e-10;
 /// Rounding allowance below a vertex's obstacle floor, in mean edge lengths.
 const CONTACT_SLACK: f64 = 1e-10;
+/// A free vertex counts as clear of the obstacle within this many mean edge lengths below the
+/// clearance (the active rows reach it to Newton accuracy, not exactly).
+const CONTACT_TOLERANCE: f64 = 1e-6;
 /// Rows within this many mean edge lengths above the clearance stay active once active.
 const CONTACT_BAND: f64 = 0.05;
 const MAX_REFINED_PER_ROUND: usize = 64;
@@ -993,7 +1016,7 @@ impl<'a> System<'a> {
             &mut self.theta,
             &mut self.grad,
         );
-        let (mut wmax, mut c2) = violation(&self.theta);
+        let (mut wmax, mut c2, mut body) = self.merit(false);
         self.best_pos.clone_from(&self.pos);
         self.best_wmax = wmax;
         if n == 0 {
@@ -1022,7 +1045,12 @@ impl<'a> System<'a> {
             if control.cancelled() {
                 return Err(AlgoError::Cancelled);
             }
-            let flat = wmax <= params.tolerance;
+            // With an obstacle, done also means every free vertex at the clearance or beyond.
+            let flat = wmax <= params.tolerance
+                && match &mut self.contact {
+                    Some(ct) => ct.satisfied(&self.pos, CONTACT_TOLERANCE * self.h),
+                    None => true,
+                };
             if flat && params.until == Until::Flattenable {
                 return Ok(End::Done("flattenable".into()));
             }
@@ -1154,8 +1182,10 @@ impl<'a> System<'a> {
                         if !self.try_step(tris, conn, &delta, 1.0) {
                             continue;
                         }
-                        let (w, c1) = violation(&self.trial_theta);
-                        if c1 <= (1.0 - 1e-4 * an) * c2 || w <= 0.5 * params.tolerance {
+                        let (w, c1, b1) = self.merit(true);
+                        if c1 <= (1.0 - 1e-4 * an) * c2
+                            || (w <= 0.5 * params.tolerance && b1 <= body)
+                        {
                             accepted = Some(an);
                             break;
                         }
@@ -1246,7 +1276,7 @@ impl<'a> System<'a> {
                     }
                 }
             };
-            (wmax, c2) = violation(&self.theta);
+            (wmax, c2, body) = self.merit(false);
             if alpha > 0.0 {
                 last_step = Some(alpha * step_norm);
             }
@@ -1429,6 +1459,23 @@ impl<'a> System<'a> {
         any
     }
 
+    /// The merit of the current state or the last trial: (ϖ_max, ℓ2 of 2π − θ together with
+    /// the obstacle's residual ‖(c − s)₊‖/h̄, that residual alone).
+    fn merit(&self, trial: bool) -> (f64, f64, f64) {
+        let (w, c) = violation(if trial {
+            &self.trial_theta
+        } else {
+            &self.theta
+        });
+        match &self.contact {
+            Some(ct) => {
+                let b = ct.residual(trial, self.h);
+                (w, c.hypot(b), b)
+            }
+            None => (w, c, 0.0),
+        }
+    }
+
     /// ‖2π − θ − Λδ‖²: the violation the linearisation predicts after the step δ.
     fn linearised_violation(&self, delta: &[[f64; 3]]) -> f64 {
         let mut sum = 0.0;
@@ -1498,7 +1545,7 @@ impl<'a> System<'a> {
         let n = self.n;
         let h = self.h;
         let mut taken = 0;
-        let (mut wmax, mut c0) = violation(&self.theta);
+        let (mut wmax, mut c0, _) = self.merit(false);
         while taken < MAX_CORRECTIONS {
             if wmax <= 0.5 * params.tolerance {
                 break;
@@ -1520,7 +1567,7 @@ impl<'a> System<'a> {
             }
             let valid = self.try_step(tris, conn, &step, 1.0);
             self.correction = step;
-            let (w1, c1) = violation(&self.trial_theta);
+            let (w1, c1, _) = self.merit(true);
             // Halving in ℓ2; never into a degenerate or flipped state.
             if !valid || c1.is_nan() || c1 > 0.5 * c0 {
                 break;

@@ -303,7 +303,7 @@ impl Figures {
             Figures::Report(_) | Figures::Flatten(_) => None,
             Figures::FlMesh(s) => Some(&s.report.stop_reason),
             Figures::Subdivide(s) => s.stop_reason.as_deref(),
-            Figures::Perturb(s) => Some(s.stop_reason.as_str()),
+            Figures::Perturb(s) => Some(&s.stop_detail),
         }
     }
 

@@ -127,6 +127,34 @@ impl<'a> Contact<'a> {
         self.active.iter().any(|&a| a)
     }
 
+    /// ‖(c − s)₊‖₂ / `h` over the rows, at the current positions or the last trial: the
+    /// obstacle's part of the merit (exact: a row is only left unqueried when provably ≥ c).
+    pub(super) fn residual(&self, trial: bool, h: f64) -> f64 {
+        let s = if trial { &self.trial_s } else { &self.s };
+        let c = self.keep.clearance;
+        s.iter()
+            .map(|&x| ((c - x).max(0.0) / h).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    }
+
+    /// Whether every row is at ≥ c − `tol` at `pos` (per vertex); rows whose lower bound says
+    /// otherwise are queried.
+    pub(super) fn satisfied(&mut self, pos: &[[f64; 3]], tol: f64) -> bool {
+        let target = self.keep.clearance - tol;
+        let mut ok = true;
+        for r in 0..self.s.len() {
+            if self.s[r] >= target {
+                continue;
+            }
+            if !self.exact[r] {
+                self.query(r, pos[self.free[r] as usize], false);
+            }
+            ok &= self.s[r] >= target;
+        }
+        ok
+    }
+
     /// The row's coefficients and right-hand side c − s when active.
     pub(super) fn row(&self, r: usize) -> Option<([f64; 3], f64)> {
         self.active[r].then(|| (self.grad[r], self.keep.clearance - self.s[r]))
@@ -182,7 +210,8 @@ impl<'a> Contact<'a> {
                     (self.s[r], self.grad[r], self.exact[r]);
                 continue;
             }
-            if self.exact_is_optional() && self.s[r] - len >= self.floor[r] {
+            // Skipped only when provably still at ≥ c (so that `residual` is exact).
+            if self.exact_is_optional() && self.s[r] - len >= self.keep.clearance {
                 (self.trial_s[r], self.trial_exact[r]) = (self.s[r] - len, false);
                 continue;
             }

@@ -269,7 +269,8 @@ pub struct BodyFigures {
 pub struct Summary {
     /// The algorithm that ran.
     pub method: Method,
-    /// ϖ_max within the tolerance.
+    /// ϖ_max within the tolerance and, with a body, every interior vertex at the clearance
+    /// or beyond (to 1e-6 mean edge lengths).
     pub converged: bool,
     /// Why it stopped (`tolerance`, `stall`, `max_outer`, `max_iterations`).
     pub stop_reason: Stop,
@@ -362,6 +363,15 @@ pub fn run(
             clearance_after: after,
         }
     });
+    // Converged also means clear of the body: every vertex that can move (interior) at the
+    // clearance or beyond, to 1e-6 mean edge lengths.
+    let h = crate::geometry::mean_edge_length(mesh);
+    let clear = body_figures.as_ref().is_none_or(|b| {
+        b.clearance_after
+            .iter()
+            .enumerate()
+            .all(|(v, &s)| !mesh.conn().is_interior(v as u32) || s >= params.clearance - 1e-6 * h)
+    });
     let hausdorff_to_input = Distance::hausdorff(&out, mesh);
     let (_, before) = local::varpi(mesh, mesh.positions());
     let (w, _) = local::varpi(&out, out.positions());
@@ -371,9 +381,22 @@ pub fn run(
     stuck_vertices.sort_by(|a, b| w[*b as usize].total_cmp(&w[*a as usize]));
     let summary = Summary {
         method: params.method,
-        converged: run.max_flattenability <= params.tolerance(),
+        converged: run.max_flattenability <= params.tolerance() && clear,
         stop_reason: run.stop,
-        stop_detail: run.stop_detail,
+        stop_detail: match &body_figures {
+            Some(b) if !clear => format!(
+                "{}; {} interior vertices closer to the body than the clearance",
+                run.stop_detail,
+                b.clearance_after
+                    .iter()
+                    .enumerate()
+                    .filter(|&(v, &s)| {
+                        mesh.conn().is_interior(v as u32) && s < params.clearance - 1e-6 * h
+                    })
+                    .count()
+            ),
+            _ => run.stop_detail,
+        },
         iterations: run.iterations,
         best_iteration: run.best_iteration,
         centres: run.centres,
