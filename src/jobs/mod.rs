@@ -126,7 +126,8 @@ impl Kind {
                  body, mesh units), max_iterations (global: 300), stall_iterations (global: \
                  40), fairing (global: 0), shape_penalty (global: 1), rings (local: 3), tau \
                  (local: 0.1), inner_iterations (local: 5), heap_fraction (local: 0.5), \
-                 stall_outer (local: 10), max_outer (local: 50)"
+                 stall_outer (local: 10), max_outer (local: 50), parallel=true|false (local: \
+                 true; false: the paper's strict heap order)"
             }
         }
     }

@@ -217,7 +217,6 @@ pub(super) fn run(
         return Ok(run);
     }
     let mut mark = vec![0u32; pos.len()];
-    let mut col = vec![NONE; pos.len()];
     let mut stamp = 0u32;
     let mut since_best = 0;
     loop {
@@ -228,20 +227,17 @@ pub(super) fn run(
             .filter(|(v, _)| mesh.conn().is_interior(*v as u32))
             .map(|(v, &x)| Key(x, v as u32))
             .collect();
-        let mut popped = 0;
-        while let Some(Key(key, c)) = heap.peek().map(|k| Key(k.0, k.1)) {
+        // l.5–14 with the stale keys of l.18: the centres of this outer iteration are the
+        // vertices above the threshold, in heap order.
+        let mut centres = Vec::new();
+        while let Some(Key(key, c)) = heap.pop() {
             if key <= params.heap_fraction * best {
                 break; // l.6
             }
-            heap.pop(); // l.7
-            if control.cancelled() {
-                return Err(AlgoError::Cancelled);
-            }
-            stamp = stamp.wrapping_add(1).max(1);
-            let (near, n_r) = rings(mesh, c, params.rings, &mut mark, stamp); // l.8
-            perturb_centre(&ctx, &mut pos, &near, n_r, &mut col);
-            popped += 1;
+            centres.push(c); // l.7
         }
+        let popped = centres.len();
+        perturb_in_waves(&ctx, &mut pos, centres, &mut mark, &mut stamp, control)?;
         run.centres += popped;
         run.iterations += 1;
         let now;
@@ -293,6 +289,78 @@ pub(super) fn run(
     run.positions = best_pos;
     run.max_flattenability = best;
     Ok(run)
+}
+
+/// l.8–13 for every centre of an outer iteration; with `parallel` (default), in waves: each wave takes, in heap order,
+/// the centres whose (r+1)-ring disks are disjoint from those already in it (so they are ≥ 2r+3
+/// rings apart: none reads a position another writes, which reach r and r+2 rings), and runs
+/// them on the rayon pool, each thread on its own copy of the positions; the moves are then
+/// written back in wave order. The result is that of running the wave's centres one after the
+/// other in any order, so it is deterministic; it differs from the paper's strict heap order
+/// only in that a later centre may run before an earlier one it does not touch.
+fn perturb_in_waves(
+    ctx: &Ctx<'_>,
+    pos: &mut [[f64; 3]],
+    mut pending: Vec<u32>,
+    mark: &mut [u32],
+    stamp: &mut u32,
+    control: &dyn Control,
+) -> Result<(), AlgoError> {
+    use rayon::prelude::*;
+    let nv = pos.len();
+    if !ctx.params.parallel {
+        // The paper's strict heap order, one centre after the other.
+        let mut col = vec![NONE; nv];
+        for c in pending {
+            if control.cancelled() {
+                return Err(AlgoError::Cancelled);
+            }
+            *stamp = stamp.wrapping_add(1).max(1);
+            let (near, n_r) = rings(ctx.mesh, c, ctx.params.rings, mark, *stamp); // l.8
+            perturb_centre(ctx, pos, &near, n_r, &mut col);
+        }
+        return Ok(());
+    }
+    let mut claim = vec![0u32; nv];
+    let mut wave_id = 0u32;
+    while !pending.is_empty() {
+        if control.cancelled() {
+            return Err(AlgoError::Cancelled);
+        }
+        wave_id += 1;
+        let mut wave = Vec::new();
+        let mut rest = Vec::new();
+        for c in pending {
+            *stamp = stamp.wrapping_add(1).max(1);
+            let (near, n_r) = rings(ctx.mesh, c, ctx.params.rings, mark, *stamp); // l.8
+            if near.iter().any(|&v| claim[v as usize] == wave_id) {
+                rest.push(c);
+                continue;
+            }
+            for &v in &near {
+                claim[v as usize] = wave_id;
+            }
+            wave.push((near, n_r));
+        }
+        pending = rest;
+        let moved: Vec<Vec<(u32, [f64; 3])>> = wave
+            .par_iter()
+            .map_init(
+                || (pos.to_vec(), vec![NONE; nv]),
+                |(local, col), (near, n_r)| {
+                    perturb_centre(ctx, local, near, *n_r, col);
+                    near[..*n_r]
+                        .iter()
+                        .map(|&v| (v, local[v as usize]))
+                        .collect()
+                },
+            )
+            .collect();
+        for (v, p) in moved.into_iter().flatten() {
+            pos[v as usize] = p;
+        }
+    }
+    Ok(())
 }
 
 /// l.8–13 for one centre: `near` is N_{r+1}(c), its first `n_r` entries N_r(c).
