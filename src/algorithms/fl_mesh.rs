@@ -759,6 +759,8 @@ struct System<'a> {
     /// Best iterate of the round by ϖ_max.
     best_pos: Vec<[f64; 3]>,
     best_wmax: f64,
+    /// The obstacle's residual at the best iterate (0 without one).
+    best_body: f64,
     /// Shape guard: faces that touch a free vertex, the smallest corner angle each may take,
     /// edges (their two faces) that must not fold, and unit face normals of the trial.
     active_faces: Vec<u32>,
@@ -951,6 +953,7 @@ impl<'a> System<'a> {
             reg_start,
             best_pos: mesh.positions().to_vec(),
             best_wmax: f64::INFINITY,
+            best_body: f64::INFINITY,
             active_faces,
             floor,
             guarded_edges,
@@ -977,7 +980,11 @@ impl<'a> System<'a> {
         report: &mut Report,
     ) -> Result<End, AlgoError> {
         let end = self.iterate_inner(round, anchors, report);
-        if self.best_wmax < violation(&self.theta).0 {
+        let (w, _, b) = self.merit(false);
+        let tol = round.params.tolerance;
+        if better(self.best_wmax, self.best_body, w, b, tol)
+            && (self.best_wmax, self.best_body) != (w, b)
+        {
             std::mem::swap(&mut self.pos, &mut self.best_pos);
             eval(
                 &self.pos,
@@ -1019,6 +1026,7 @@ impl<'a> System<'a> {
         let (mut wmax, mut c2, mut body) = self.merit(false);
         self.best_pos.clone_from(&self.pos);
         self.best_wmax = wmax;
+        self.best_body = body;
         if n == 0 {
             return Ok(End::Done("no free interior vertex".into()));
         }
@@ -1079,11 +1087,13 @@ impl<'a> System<'a> {
                     high_streak[r] = 0;
                 }
             }
-            // Stall: ϖ_max has not halved over the window.
-            window.push_back(wmax);
+            // Stall: ϖ_max (with an obstacle, the larger of it and the obstacle's residual)
+            // has not halved over the window.
+            let progress = wmax.max(body);
+            window.push_back(progress);
             if window.len() > params.stall_iterations {
-                let old = window.pop_front().unwrap_or(wmax);
-                if !flat && wmax > 0.5 * old {
+                let old = window.pop_front().unwrap_or(progress);
+                if !flat && progress > 0.5 * old {
                     report.stop_reason = "stalled: ϖ_max did not halve".into();
                     return Ok(End::Stalled(self.stuck(&high_streak, params)));
                 }
@@ -1093,10 +1103,10 @@ impl<'a> System<'a> {
                     anchors[v as usize] = g.closest(self.pos[v as usize]).0;
                 }
             }
-            if params.until == Until::Flattenable && wmax >= prev_wmax {
+            if params.until == Until::Flattenable && progress >= prev_wmax {
                 fair *= 0.5;
             }
-            prev_wmax = wmax;
+            prev_wmax = progress;
             if let Some(ct) = &mut self.contact {
                 ct.choose(&self.pos, CONTACT_BAND * self.h);
             }
@@ -1147,8 +1157,9 @@ impl<'a> System<'a> {
                         delta[r] = [0, 1, 2].map(|c| dn[r][c] + dt[r][c]);
                     }
                     if !self.try_step(tris, conn, &delta, params.tau) {
-                        report.stop_reason =
-                            "the fixed step degenerates, turns over or folds a triangle".into();
+                        report.stop_reason = "the fixed step degenerates, turns over, folds a \
+                                              triangle or takes a vertex into the obstacle"
+                            .into();
                         return Ok(End::Stalled(self.stuck(&high_streak, params)));
                     }
                     self.accept_trial();
@@ -1240,6 +1251,8 @@ impl<'a> System<'a> {
                         for r in 0..n {
                             delta[r] = [0, 1, 2].map(|c| an * dn[r][c] + at * dt[r][c]);
                         }
+                        // Levenberg–Marquardt models ‖2π − θ‖ alone (not the obstacle's rows).
+                        let c2 = violation(&self.theta).1;
                         let predicted = c2 * c2 - self.linearised_violation(&delta);
                         if !self.try_step(tris, conn, &delta, 1.0) {
                             continue;
@@ -1280,11 +1293,10 @@ impl<'a> System<'a> {
             if alpha > 0.0 {
                 last_step = Some(alpha * step_norm);
             }
-            let better = wmax < self.best_wmax
-                || (wmax <= params.tolerance && self.best_wmax <= params.tolerance);
-            if better {
+            if better(wmax, body, self.best_wmax, self.best_body, params.tolerance) {
                 self.best_pos.copy_from_slice(&self.pos);
                 self.best_wmax = wmax;
+                self.best_body = body;
                 report.best_iteration = report.iterations;
             }
             self.push_history(
@@ -1545,7 +1557,8 @@ impl<'a> System<'a> {
         let n = self.n;
         let h = self.h;
         let mut taken = 0;
-        let (mut wmax, mut c0, _) = self.merit(false);
+        // Corrections hold the obstacle's rows, so they are judged by ‖2π − θ‖ alone.
+        let (mut wmax, mut c0) = violation(&self.theta);
         while taken < MAX_CORRECTIONS {
             if wmax <= 0.5 * params.tolerance {
                 break;
@@ -1567,7 +1580,7 @@ impl<'a> System<'a> {
             }
             let valid = self.try_step(tris, conn, &step, 1.0);
             self.correction = step;
-            let (w1, c1, _) = self.merit(true);
+            let (w1, c1) = violation(&self.trial_theta);
             // Halving in ℓ2; never into a degenerate or flipped state.
             if !valid || c1.is_nan() || c1 > 0.5 * c0 {
                 break;
@@ -1763,6 +1776,18 @@ impl Factor {
             }
             Factor::Ldlt(s) => s.solve_many_in_place(rhs, 2),
         }
+    }
+}
+
+/// Whether an iterate with ϖ_max `w` and obstacle residual `b` is at least as good as one with
+/// (`w0`, `b0`): among flattenable ones (ϖ_max ≤ `tol`) the one no farther inside the
+/// obstacle (so without one the latest flattenable iterate wins), else the lower ϖ_max.
+fn better(w: f64, b: f64, w0: f64, b0: f64, tol: f64) -> bool {
+    match (w <= tol, w0 <= tol) {
+        (true, true) => b <= b0,
+        (true, false) => true,
+        (false, true) => false,
+        (false, false) => w < w0,
     }
 }
 

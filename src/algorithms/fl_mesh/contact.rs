@@ -13,8 +13,10 @@
 //! refused when a vertex ends below its floor min(c, s at the input) (less 1e-10·h̄ of
 //! rounding), so a vertex that started at least c outside never ends closer and none that
 //! started outside ends inside. For a closed obstacle the signed distance is 1-Lipschitz, so
-//! a vertex with s − |Δ| ≥ floor needs no query; an open one may change sign beside its
-//! border, so there every moved vertex is queried.
+//! a vertex with s − |Δ| ≥ c needs no query; an open one may change sign beside its border,
+//! so there every moved vertex is queried. (This assumes the closed components neither
+//! intersect nor nest, as a body does; where they do, the nearest feature's sign can flip
+//! away from the surface and a skipped query could miss a crossing.)
 
 use crate::mesh::dot;
 

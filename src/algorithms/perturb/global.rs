@@ -54,7 +54,7 @@ pub(super) fn run(
         .collect();
     let stop = if report.converged {
         Stop::Tolerance
-    } else if report.stop_reason.starts_with("max_iterations") {
+    } else if report.stop_reason.contains("max_iterations") {
         Stop::MaxIterations
     } else {
         Stop::Stall
