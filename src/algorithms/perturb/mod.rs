@@ -7,12 +7,12 @@
 //! problem (Eq. 20) on the whole mesh at once with fl-mesh's SQP and the body as inequality
 //! rows with an active set, to ϖ_max ≤ 1e-6 (`tolerance` defaults to 1e-6 for it, to the
 //! paper's 1e-3 for `local`). Measured (issue 15 note, examples/perturb_corpus: fl-mesh
-//! outputs given four small bumps): it reaches 1e-6 in 2–26 iterations on 39 of the 40 cases
+//! outputs given four small bumps): it reaches 1e-6 in 2–30 iterations on 39 of the 40 cases
 //! whose fl-mesh output is flattenable (the exception carries folds and 0.07° slivers), where
-//! Algorithm 2 reaches its 1e-3 on 33; on the 3.5k-vertex sleeve of benches/perturb it takes
-//! 0.92 s to 3e-7 against local's 1.33 s to a stall at 3.5e-3.
+//! Algorithm 2 reaches its 1e-3 on 30; on the 3.5k-vertex sleeve of benches/perturb it takes
+//! 0.91 s to 3e-7, local 1.10 s to 7.4e-4 (0.91 s to a stall at 3.5e-3 in the strict order).
 //!
-//! `method = "local"` is Algorithm 2 as written: a max-heap of interior vertices keyed by ϖ;
+//! `method = "local"` is Algorithm 2 (with the departures listed below): a max-heap of interior vertices keyed by ϖ;
 //! while its top exceeds `heap_fraction`·ϖ_best, the top vertex is popped and the interior
 //! vertices of its r-ring disk (V_act, Eq. 18) move to make the interior vertices of its
 //! (r+1)-ring disk (V_dev, Eq. 19) flattenable, closest to the input (J_pos, Eq. 5), by
