@@ -559,14 +559,7 @@ async fn fl_mesh_job_end_to_end() {
     assert_eq!(result["job"]["converged"], true, "{result}");
     assert_eq!(result["job"]["kind"], "fl-mesh", "{result}");
     assert!(result["job"]["iterations"].as_u64().unwrap() >= 1);
-    let b = c
-        .get(s.url(&format!("/v1/jobs/{id}/mesh?format=obj")))
-        .send()
-        .await
-        .unwrap()
-        .bytes()
-        .await
-        .unwrap();
+    let b = download(&c, &s, &format!("/v1/jobs/{id}/mesh?format=obj")).await;
     let (out, _) = flatmesh::io::load(&b, flatmesh::io::Format::Obj).unwrap();
     let theta = flatmesh::geometry::angle_sums(&out);
     let varpi = flatmesh::geometry::flattenability(&out, &theta);
@@ -736,14 +729,7 @@ async fn perturb_job_end_to_end() {
     }
     // The GLB carries each vertex's displacement beside ϖ: read its accessor from the raw
     // chunks and compare with the distance recomputed from the OBJ download.
-    let glb = c
-        .get(s.url(&format!("/v1/jobs/{id}/mesh?format=glb")))
-        .send()
-        .await
-        .unwrap()
-        .bytes()
-        .await
-        .unwrap();
+    let glb = download(&c, &s, &format!("/v1/jobs/{id}/mesh?format=glb")).await;
     let u32_at = |i: usize| u32::from_le_bytes(glb[i..i + 4].try_into().unwrap()) as usize;
     let json_len = u32_at(12);
     let root: Value = serde_json::from_slice(&glb[20..20 + json_len]).unwrap();
@@ -1352,14 +1338,7 @@ async fn restart_loses_nothing() {
     let done = submit(&c, &s, json!({"kind": "flatten", "mesh_id": cyl["id"]})).await;
     let done_id = done["id"].as_str().unwrap().to_string();
     wait_for(&c, &s, &done_id, &["succeeded"]).await;
-    let before = c
-        .get(s.url(&format!("/v1/jobs/{done_id}/patterns?format=dxf")))
-        .send()
-        .await
-        .unwrap()
-        .bytes()
-        .await
-        .unwrap();
+    let before = download(&c, &s, &format!("/v1/jobs/{done_id}/patterns?format=dxf")).await;
     let slow = upload(&c, &s, slow_obj()).await;
     let params: Value = serde_json::from_str(SLOW).unwrap();
     let run = submit(
@@ -1378,14 +1357,7 @@ async fn restart_loses_nothing() {
     let s = Server::start(&dir, &["--workers", "1", "--lease", "1s"]);
     let j = job(&c, &s, &done_id).await;
     assert_eq!(j["status"], "succeeded");
-    let after = c
-        .get(s.url(&format!("/v1/jobs/{done_id}/patterns?format=dxf")))
-        .send()
-        .await
-        .unwrap()
-        .bytes()
-        .await
-        .unwrap();
+    let after = download(&c, &s, &format!("/v1/jobs/{done_id}/patterns?format=dxf")).await;
     assert_eq!(before, after);
     json_of(
         c.get(s.url(&format!("/v1/meshes/{}", cyl["id"].as_str().unwrap())))

@@ -202,6 +202,18 @@ pub async fn submit(c: &reqwest::Client, s: &Server, body: Value) -> Value {
     json_of(r, "Job").await
 }
 
+/// GET `path` and its body, whatever the status.
+pub async fn download(c: &reqwest::Client, s: &Server, path: &str) -> Vec<u8> {
+    c.get(s.url(path))
+        .send()
+        .await
+        .unwrap()
+        .bytes()
+        .await
+        .unwrap()
+        .to_vec()
+}
+
 pub async fn job(c: &reqwest::Client, s: &Server, id: &str) -> Value {
     let r = c
         .get(s.url(&format!("/v1/jobs/{id}")))
