@@ -12,8 +12,8 @@
 //! Algorithm 2 reaches its 1e-3 on 30; on the 3.5k-vertex sleeve of benches/perturb it takes
 //! 0.91 s to 3e-7, local 1.10 s to 7.4e-4 (0.91 s to a stall at 3.5e-3 in the strict order).
 //!
-//! `method = "local"` is Algorithm 2 (with the departures listed below): a max-heap of interior vertices keyed by ϖ;
-//! while its top exceeds `heap_fraction`·ϖ_best, the top vertex is popped and the interior
+//! `method = "local"` is Algorithm 2 (with the departures listed below): a max-heap of
+//! interior vertices keyed by ϖ; while its top exceeds `heap_fraction`·ϖ_best, the top vertex is popped and the interior
 //! vertices of its r-ring disk (V_act, Eq. 18) move to make the interior vertices of its
 //! (r+1)-ring disk (V_dev, Eq. 19) flattenable, closest to the input (J_pos, Eq. 5), by
 //! `inner_iterations` damped steps v ← v + τδ of the KKT system Eq. 22. After each outer
@@ -62,9 +62,11 @@
 //! - Closest points are recomputed for every query with the grid (exact), not tracked locally
 //!   as in [48]; measured fast enough at these sizes.
 //!
-//! An input whose ϖ_max is within `tolerance` comes back bit-identical after 0 iterations.
-//! Boundary and seam vertices never move (they are not interior), and vertices outside every
-//! popped centre's r-ring disk are never written.
+//! An input whose ϖ_max is within `tolerance` comes back bit-identical after 0 iterations
+//! (`global` with a body: only when every interior vertex is also at the clearance; `local`
+//! stops on ϖ alone). `converged` asks for both. Boundary and seam vertices never move (they
+//! are not interior); with `local`, vertices outside every popped centre's r-ring disk are
+//! never written.
 
 mod body;
 mod global;
