@@ -199,8 +199,8 @@ impl<'a> Contact<'a> {
         self.keep.obstacle.is_closed()
     }
 
-    /// Check a trial: positions `from` and `to` per vertex. False when a vertex ends below its floor (its row
-    /// is remembered and activated at the next iteration).
+    /// Check a trial: positions `from` and `to` per vertex. False when a vertex ends below its
+    /// floor (its row is remembered and activated at the next iteration).
     pub(super) fn check_trial(&mut self, from: &[[f64; 3]], to: &[[f64; 3]]) -> bool {
         let mut ok = true;
         for r in 0..self.s.len() {
