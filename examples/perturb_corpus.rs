@@ -6,6 +6,11 @@
 //! the MakeHuman body they were made for (female/male generic, same frame).
 //!
 //!     cargo run --release --example perturb_corpus -- [FILTER] [--out DIR] [--no-bumps]
+//!         [--body-under]
+//!
+//! `--body-under` gives every case a body that follows fl-mesh's output 0.3 h̄ under it
+//! (`corpus::body_under`, open, oriented towards the garment) and pushes the four bumps 0.6 h̄
+//! *into* it, for real garments that have no body of their own that fits.
 //!
 //! Every figure is measured here from the geometry: ϖ_max (corpus::max_flattenability), folds,
 //! smallest corner, relative Hausdorff distance to the perturbed input, largest displacement in
@@ -46,11 +51,30 @@ fn max_distance(a: &Mesh, b: &Mesh) -> f64 {
         .fold(0.0, f64::max)
 }
 
-/// Vertices strictly inside `body`, by brute force.
-fn penetrating(mesh: &Mesh, body: &Mesh) -> usize {
-    mesh.positions()
-        .par_iter()
-        .filter(|&&p| corpus::brute_signed_distance(body, p) < 0.0)
+/// A body for the case: with `under`, one that follows fl-mesh's output 0.3 h̄ under it (open;
+/// signed distances by the closest face's side), else the MakeHuman body a garment was made
+/// for (closed; winding number).
+struct CaseBody {
+    mesh: Mesh,
+    open: bool,
+}
+
+/// Interior vertices deeper inside `body` than 1e-6 mean edge lengths (what `converged`
+/// allows), by brute force.
+fn penetrating(mesh: &Mesh, body: &CaseBody) -> usize {
+    let h = flatmesh::geometry::mean_edge_length(mesh);
+    (0..mesh.num_vertices() as u32)
+        .into_par_iter()
+        .filter(|&v| mesh.conn().is_interior(v))
+        .filter(|&v| {
+            let p = mesh.position(v);
+            let s = if body.open {
+                corpus::brute_signed_distance_open(&body.mesh, p)
+            } else {
+                corpus::brute_signed_distance(&body.mesh, p)
+            };
+            s < -1e-6 * h
+        })
         .count()
 }
 
@@ -58,11 +82,13 @@ fn main() {
     let mut filter = String::new();
     let mut out = PathBuf::from("target/perturb_corpus");
     let mut bumps = true;
+    let mut under = false;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
             "--out" => out = PathBuf::from(args.next().expect("--out DIR")),
             "--no-bumps" => bumps = false,
+            "--body-under" => under = true,
             f => filter = f.to_string(),
         }
     }
@@ -108,23 +134,37 @@ fn main() {
         if fl.conn().interior_vertices().next().is_none() {
             continue;
         }
+        let h = flatmesh::geometry::mean_edge_length(&fl);
+        let body = if under {
+            Some(CaseBody {
+                mesh: corpus::body_under(&fl, 0.3 * h),
+                open: true,
+            })
+        } else {
+            body_for(&case.name, &root).map(|mesh| CaseBody { mesh, open: false })
+        };
+        // With a body under the garment the dents go into it.
+        let height = if under { -0.6 } else { BUMP_HEIGHT };
         let input = if bumps {
-            corpus::with_bumps(&fl, 4, BUMP_HEIGHT, BUMP_RADIUS, 17)
+            corpus::with_bumps(&fl, 4, height, BUMP_RADIUS, 17)
         } else {
             fl.clone()
         };
         // A flattenable mesh this far from the input is known (fl-mesh's, before the bumps).
         let known = max_distance(&input, &fl);
-        let body = body_for(&case.name, &root);
         let pen_in = body.as_ref().map(|b| penetrating(&input, b));
-        let h = flatmesh::geometry::mean_edge_length(&input);
         for method in [perturb::Method::Global, perturb::Method::Local] {
             let params = perturb::Params {
                 method,
                 ..perturb::Params::default()
             };
             let t = std::time::Instant::now();
-            let res = perturb::run(&input, body.as_ref(), &params, &Silent::default());
+            let res = perturb::run(
+                &input,
+                body.as_ref().map(|b| &b.mesh),
+                &params,
+                &Silent::default(),
+            );
             let seconds = t.elapsed().as_secs_f64();
             let o = match res {
                 Ok(o) => o,

@@ -272,6 +272,39 @@ fn procedural_mesh(positions: Vec<[f64; 3]>, triangles: Vec<[u32; 3]>) -> Mesh {
     Mesh::new(raw).expect("a procedural mesh is valid").0
 }
 
+/// A body that follows a garment: `mesh` moved by `distance` against its vertex normals,
+/// same triangles (so its outside, the side its normals point to, is the garment's side).
+/// For `perturb` on a real garment where no body of its own fits it (an open body: the
+/// solver queries every moved vertex).
+pub fn body_under(mesh: &Mesh, distance: f64) -> Mesh {
+    let normals = geometry::vertex_normals(mesh);
+    let pos = mesh
+        .positions()
+        .iter()
+        .zip(&normals)
+        .map(|(p, n)| [0, 1, 2].map(|k| p[k] - distance * n[k]))
+        .collect();
+    mesh.with_positions(pos).unwrap_or_else(|_| mesh.clone())
+}
+
+/// Signed distance from `p` to the open surface `body` by brute force: the closest point over
+/// every triangle, signed by the side of that triangle's plane (positive on its normal's
+/// side). Independent of the pseudo-normals `perturb` uses; exact where the closest point is
+/// inside a face, which is where a garment lies over a body that follows it.
+pub fn brute_signed_distance_open(body: &Mesh, p: [f64; 3]) -> f64 {
+    let mut best = (f64::INFINITY, 1.0);
+    for t in body.triangles() {
+        let [a, b, c] = t.map(|v| body.position(v));
+        let q = crate::spatial::closest_point_on_triangle(p, a, b, c);
+        let d = dot(sub(p, q), sub(p, q)).sqrt();
+        if d < best.0 {
+            let n = crate::mesh::cross(sub(b, a), sub(c, a));
+            best = (d, if dot(sub(p, q), n) < 0.0 { -1.0 } else { 1.0 });
+        }
+    }
+    best.0 * best.1
+}
+
 /// Signed distance from `p` to the closed surface `body` by brute force: the closest point over
 /// every triangle, the sign from the winding number (Van Oosterom–Strackee solid angles),
 /// negative inside. Independent of the pseudo-normals `perturb` uses; O(triangles) per query.

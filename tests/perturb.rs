@@ -368,3 +368,67 @@ fn parallel_waves_are_deterministic() {
     assert!(sc.max_flattenability_after <= sc.max_flattenability_before);
     assert!(varpi_max(&c) <= varpi_max(&garment));
 }
+
+/// A real garment against a body that follows it (no body of its own fits any shared garment
+/// fl-mesh makes flattenable: the MakeHuman suits are not, and the sport suit's fl-mesh output
+/// sits up to 7 cm inside the MakeHuman proxy body): gf_skirt_3D_0 made flattenable by fl-mesh,
+/// a body 0.3 h̄ under it, four dents of 0.6 h̄ pushed into the body. Global must end flattenable
+/// (ϖ_max ≤ 1e-6) with no interior vertex inside the body, and no vertex that started outside
+/// may end inside (brute-force distances over every body triangle).
+#[test]
+fn real_skirt_with_dents_into_a_body_that_follows_it() {
+    use rayon::prelude::*;
+    let Some(path) = flatmesh::corpus::shared_mesh_for_tests("garment/gf_skirt_3D_0.obj") else {
+        return;
+    };
+    let raw = flatmesh::io::load_path(&path).unwrap().0;
+    let (flat, _) = flatmesh::algorithms::fl_mesh::solve(
+        &raw,
+        &flatmesh::algorithms::fl_mesh::Params::default(),
+        &Silent::default(),
+    )
+    .unwrap();
+    assert!(varpi_max(&flat) <= 1e-6);
+    let h = flatmesh::geometry::mean_edge_length(&flat);
+    let body = flatmesh::corpus::body_under(&flat, 0.3 * h);
+    let garment = flatmesh::corpus::with_bumps(&flat, 4, -0.6, 4.0, 5);
+    let signed = |m: &Mesh| -> Vec<f64> {
+        m.positions()
+            .par_iter()
+            .map(|&p| flatmesh::corpus::brute_signed_distance_open(&body, p))
+            .collect()
+    };
+    let before = signed(&garment);
+    let (out, s) = run(&garment, Some(&body), &Params::default());
+    let after = signed(&out);
+    // Inside: deeper than `converged` allows (1e-6 h̄: a vertex the rows push out from inside
+    // ends at the clearance, 0 here, to Newton accuracy).
+    let inside = |v: &[f64]| {
+        (0..v.len())
+            .filter(|&i| garment.conn().is_interior(i as u32) && v[i] < -1e-6 * h)
+            .count()
+    };
+    eprintln!(
+        "skirt over its body: ϖ_max {:.3e} -> {:.3e} in {} its ({}), interior vertices inside {} -> {}",
+        varpi_max(&garment),
+        varpi_max(&out),
+        s.iterations,
+        s.stop_detail,
+        inside(&before),
+        inside(&after)
+    );
+    assert!(inside(&before) > 0, "the dents reach into the body");
+    assert!(s.converged, "{}", s.stop_detail);
+    assert!(varpi_max(&out) <= 1e-6);
+    assert_eq!(inside(&after), 0);
+    for v in 0..garment.num_vertices() {
+        if before[v] >= 0.0 {
+            assert!(
+                after[v] >= -1e-9 * h,
+                "vertex {v}: {} -> {}",
+                before[v],
+                after[v]
+            );
+        }
+    }
+}

@@ -112,6 +112,11 @@ impl Body {
         )
     }
 
+    /// Whether every component is closed (its signed distance is then 1-Lipschitz).
+    pub fn is_closed(&self) -> bool {
+        self.closed
+    }
+
     /// Signed distance of `p` to the body and its gradient.
     pub fn clearance(&self, p: [f64; 3]) -> Clearance {
         let (h, d2, f) = self.grid.closest(p);
@@ -165,7 +170,7 @@ impl crate::algorithms::fl_mesh::Obstacle for Body {
         (c.signed, c.gradient)
     }
     fn is_closed(&self) -> bool {
-        self.closed
+        Body::is_closed(self)
     }
 }
 

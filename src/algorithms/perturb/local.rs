@@ -383,8 +383,10 @@ fn perturb_centre(ctx: &Ctx<'_>, pos: &mut [[f64; 3]], near: &[u32], n_r: usize,
         col[v as usize] = i as u32;
     }
     let mut grad = Vec::new();
+    // Per active vertex, a lower bound of its signed clearance (unknown at first).
+    let mut bound = vec![f64::NEG_INFINITY; act.len()];
     for _ in 0..ctx.params.inner_iterations {
-        if !inner_step(ctx, pos, &act, &dev, col, &mut grad) {
+        if !inner_step(ctx, pos, &act, &dev, col, &mut grad, &mut bound) {
             break;
         }
     }
@@ -402,8 +404,12 @@ fn inner_step(
     dev: &[u32],
     col: &[u32],
     grad: &mut Vec<(u32, [f64; 3])>,
+    bound: &mut [f64],
 ) -> bool {
     let mesh = ctx.mesh;
+    // A closed body's signed distance is 1-Lipschitz: a vertex whose lower bound clears what is
+    // asked needs no query (`bound` falls by each move's length).
+    let lipschitz = ctx.body.is_some_and(|b| b.is_closed());
     let n = 3 * act.len();
     let h = ctx.h;
     // θ rows (scaled by h̄ so that their entries, like the body rows', are O(1)).
@@ -430,9 +436,18 @@ fn inner_step(
         .collect();
     // Body rows: V_collid = the active vertices below the clearance (paper-notes A.3 item 7),
     // then an active set (item 9).
-    let clear: Vec<Option<super::body::Clearance>> = act
+    let mut clear: Vec<Option<super::body::Clearance>> = act
         .iter()
-        .map(|&v| ctx.body.map(|b| b.clearance(pos[v as usize])))
+        .enumerate()
+        .map(|(i, &v)| {
+            let b = ctx.body?;
+            if lipschitz && bound[i] >= ctx.params.clearance {
+                return None; // not colliding
+            }
+            let c = b.clearance(pos[v as usize]);
+            bound[i] = c.signed;
+            Some(c)
+        })
         .collect();
     let mut active: Vec<usize> = (0..act.len())
         .filter(|&i| clear[i].is_some_and(|c| c.signed < ctx.params.clearance))
@@ -484,6 +499,10 @@ fn inner_step(
                 for (i, &v) in act.iter().enumerate() {
                     let p = pos[v as usize];
                     let q = [0, 1, 2].map(|d| p[d] + t * delta[3 * i + d]);
+                    let moved = t * (0..3).map(|d| delta[3 * i + d].powi(2)).sum::<f64>().sqrt();
+                    if lipschitz && bound[i] - moved >= ctx.floor[v as usize] {
+                        continue;
+                    }
                     if body.clearance(q).signed < ctx.floor[v as usize] {
                         violators.push(i);
                     }
@@ -502,6 +521,7 @@ fn inner_step(
                     for d in 0..3 {
                         pos[v as usize][d] += t * delta[3 * i + d];
                     }
+                    bound[i] -= t * (0..3).map(|d| delta[3 * i + d].powi(2)).sum::<f64>().sqrt();
                 }
                 return true;
             }
@@ -513,6 +533,16 @@ fn inner_step(
             .collect();
         if fresh.is_empty() {
             return false;
+        }
+        // A row needs its vertex's exact clearance (skipped above when the bound cleared it).
+        for &i in &fresh {
+            if clear[i].is_none() {
+                if let Some(b) = ctx.body {
+                    let c = b.clearance(pos[act[i] as usize]);
+                    bound[i] = c.signed;
+                    clear[i] = Some(c);
+                }
+            }
         }
         active.extend(fresh);
         active.sort_unstable();
