@@ -262,13 +262,7 @@ fn band_triangles(around: usize, along: usize) -> Vec<[u32; 3]> {
 }
 
 fn procedural_mesh(positions: Vec<[f64; 3]>, triangles: Vec<[u32; 3]>) -> Mesh {
-    let raw = RawMesh {
-        face_patch: vec![0; triangles.len()],
-        positions,
-        triangles,
-        patch_names: vec!["default".into()],
-        uv: None,
-    };
+    let raw = crate::fixtures::single_patch("default", positions, triangles);
     Mesh::new(raw).expect("a procedural mesh is valid").0
 }
 

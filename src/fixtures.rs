@@ -107,7 +107,12 @@ pub fn write_all(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
     Ok(written)
 }
 
-fn single_patch(name: &str, positions: Vec<[f64; 3]>, triangles: Vec<[u32; 3]>) -> RawMesh {
+/// One patch named `name` of the given triangles.
+pub(crate) fn single_patch(
+    name: &str,
+    positions: Vec<[f64; 3]>,
+    triangles: Vec<[u32; 3]>,
+) -> RawMesh {
     let n = triangles.len();
     RawMesh {
         positions,

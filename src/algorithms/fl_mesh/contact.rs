@@ -112,8 +112,8 @@ impl<'a> Contact<'a> {
 
     /// Choose the rows for the next solve at positions `pos` (per vertex): those below the
     /// clearance, those a trial was refused for, and those already active that are still
-    /// within `band` of it. Returns whether any row is active.
-    pub(super) fn choose(&mut self, pos: &[[f64; 3]], band: f64) -> bool {
+    /// within `band` of it.
+    pub(super) fn choose(&mut self, pos: &[[f64; 3]], band: f64) {
         let c = self.keep.clearance;
         self.forced.fill(false);
         for r in self.refused.drain(..) {
@@ -126,7 +126,6 @@ impl<'a> Contact<'a> {
             self.active[r] =
                 self.forced[r] || self.s[r] < c || (self.active[r] && self.s[r] < c + band);
         }
-        self.active.iter().any(|&a| a)
     }
 
     /// ‖(c − s)₊‖₂ / `h` over the rows, at the current positions or the last trial: the

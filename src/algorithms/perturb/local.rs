@@ -291,13 +291,14 @@ pub(super) fn run(
     Ok(run)
 }
 
-/// l.8–13 for every centre of an outer iteration; with `parallel` (default), in waves: each wave takes, in heap order,
-/// the centres whose (r+1)-ring disks are disjoint from those already in it (so they are ≥ 2r+3
-/// rings apart: none reads a position another writes, which reach r and r+2 rings), and runs
-/// them on the rayon pool, each thread on its own copy of the positions; the moves are then
-/// written back in wave order. The result is that of running the wave's centres one after the
-/// other in any order, so it is deterministic; it differs from the paper's strict heap order
-/// only in that a later centre may run before an earlier one it does not touch.
+/// l.8–13 for every centre of an outer iteration; with `parallel` (default), in waves: each
+/// wave takes, in heap order, the centres whose (r+1)-ring disks are disjoint from those
+/// already in it (so they are ≥ 2r+3 rings apart: none reads a position another writes, which
+/// reach r and r+2 rings), and runs them on the rayon pool, each thread on its own copy of the
+/// positions; the moves are then written back in wave order. The result is that of running the
+/// wave's centres one after the other in any order, so it is deterministic; it differs from the
+/// paper's strict heap order only in that a later centre may run before an earlier one it does
+/// not touch.
 fn perturb_in_waves(
     ctx: &Ctx<'_>,
     pos: &mut [[f64; 3]],

@@ -380,11 +380,12 @@ pub fn run(
     // Converged also means clear of the body: every vertex that can move (interior) at the
     // clearance or beyond, to 1e-6 mean edge lengths.
     let h = crate::geometry::mean_edge_length(mesh);
-    let clear = body_figures.as_ref().is_none_or(|b| {
+    let too_close = body_figures.as_ref().map_or(0, |b| {
         b.clearance_after
             .iter()
             .enumerate()
-            .all(|(v, &s)| !mesh.conn().is_interior(v as u32) || s >= params.clearance - 1e-6 * h)
+            .filter(|&(v, &s)| mesh.conn().is_interior(v as u32) && s < params.clearance - 1e-6 * h)
+            .count()
     });
     let hausdorff_to_input = Distance::hausdorff(&out, mesh);
     let (_, before) = local::varpi(mesh, mesh.positions());
@@ -395,21 +396,14 @@ pub fn run(
     stuck_vertices.sort_by(|a, b| w[*b as usize].total_cmp(&w[*a as usize]));
     let summary = Summary {
         method: params.method,
-        converged: run.max_flattenability <= params.tolerance() && clear,
+        converged: run.max_flattenability <= params.tolerance() && too_close == 0,
         stop_reason: run.stop,
-        stop_detail: match &body_figures {
-            Some(b) if !clear => format!(
-                "{}; {} interior vertices closer to the body than the clearance",
-                run.stop_detail,
-                b.clearance_after
-                    .iter()
-                    .enumerate()
-                    .filter(|&(v, &s)| {
-                        mesh.conn().is_interior(v as u32) && s < params.clearance - 1e-6 * h
-                    })
-                    .count()
+        stop_detail: match too_close {
+            0 => run.stop_detail,
+            k => format!(
+                "{}; {k} interior vertices closer to the body than the clearance",
+                run.stop_detail
             ),
-            _ => run.stop_detail,
         },
         iterations: run.iterations,
         best_iteration: run.best_iteration,
