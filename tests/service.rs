@@ -760,6 +760,60 @@ async fn perturb_job_end_to_end() {
 }
 
 /// A subdivide job with a curve on a rim edge, and one with a curve it must refuse.
+/// A develop job (Su et al.'s loop method): the table, every level downloadable, the output
+/// developable by angle sums recomputed here.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn develop_job_end_to_end() {
+    let s = Server::start(&tmp("k-develop"), &[]);
+    let c = client();
+    let cone = fixture("cone_noisy");
+    let (kmesh, _) = flatmesh::io::load(&cone, flatmesh::io::Format::Obj).unwrap();
+    let km = upload(&c, &s, cone).await;
+    let j = submit(
+        &c,
+        &s,
+        json!({"kind": "develop", "mesh_id": km["id"], "params": {"method": "loop"}}),
+    )
+    .await;
+    let id = j["id"].as_str().unwrap();
+    let done = wait_for(&c, &s, id, &["succeeded", "failed"]).await;
+    assert_eq!(done["status"], "succeeded", "{done}");
+    assert_eq!(done["converged"], true, "{done}");
+    let result = json_of(
+        c.get(s.url(&format!("/v1/jobs/{id}/result")))
+            .send()
+            .await
+            .unwrap(),
+        "Report",
+    )
+    .await;
+    let fig = &result["job"];
+    assert_eq!(fig["kind"], "develop");
+    let rows = fig["table"]["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 4, "{fig}");
+    let level = download(&c, &s, &format!("/v1/jobs/{id}/mesh?level=1&format=obj")).await;
+    let (lv, _) = flatmesh::io::load(&level, flatmesh::io::Format::Obj).unwrap();
+    assert_eq!(
+        lv.num_vertices(),
+        kmesh.num_vertices() + kmesh.conn().edges().len()
+    );
+    assert_eq!(lv.num_faces(), 4 * kmesh.num_faces());
+    let out = download(&c, &s, &format!("/v1/jobs/{id}/mesh?format=obj")).await;
+    let (out, _) = flatmesh::io::load(&out, flatmesh::io::Format::Obj).unwrap();
+    let w = flatmesh::geometry::flattenability(&out, &flatmesh::geometry::angle_sums(&out));
+    let wmax = w.iter().copied().fold(0.0, f64::max);
+    // The OBJ's decimal positions round the exact output a little.
+    assert!(wmax <= 1e-5, "ϖ_max {wmax}");
+    let r = c
+        .post(s.url("/v1/jobs"))
+        .json(&json!({"kind": "develop", "mesh_id": km["id"], "params": {"relaxation": 2.5}}))
+        .send()
+        .await
+        .unwrap();
+    let p = problem(r, 422).await;
+    assert_eq!(p["field"], "params.relaxation", "{p}");
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn subdivide_job_end_to_end() {
     let s = Server::start(&tmp("k-subdivide"), &[]);

@@ -648,7 +648,7 @@ fn solve_phase(
 
 /// Vertices of closed components (no boundary or seam vertex) whose Euler characteristic is not
 /// zero: Σ(2π − θ) = 2πχ there, so not every vertex can reach θ = 2π.
-fn impossible_vertices(mesh: &Mesh) -> Vec<bool> {
+pub(crate) fn impossible_vertices(mesh: &Mesh) -> Vec<bool> {
     let nv = mesh.num_vertices();
     let mut parent: Vec<u32> = (0..nv as u32).collect();
     fn find(p: &mut [u32], mut x: u32) -> u32 {

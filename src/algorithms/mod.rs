@@ -4,6 +4,7 @@
 //! cancellation ([`Control`]), typed parameters parsed from JSON, and the shape of an outcome.
 //! Which algorithm a job kind runs is the registry's business ([`crate::jobs`]).
 
+pub mod develop;
 pub mod fl_mesh;
 pub mod flatten;
 pub mod perturb;

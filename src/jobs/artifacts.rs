@@ -108,15 +108,18 @@ pub fn render(
         media_type: "application/json",
         bytes: serde_json::to_vec_pretty(&value).unwrap_or_default(),
     }];
-    // `perturb`: how far each vertex moved, beside ϖ.
-    let displacement = match &outcome.figures {
-        super::Figures::Perturb(s) => Some(io::gltf::VertexScalar {
-            attribute: "_DISPLACEMENT",
-            quantity: "distance each vertex moved from the input, mesh units",
-            values: &s.displacement,
-        }),
+    // `perturb`, `develop`: how far each vertex moved, beside ϖ.
+    let moved = match &outcome.figures {
+        super::Figures::Perturb(s) => Some(&s.displacement),
+        super::Figures::Develop(s) => Some(&s.displacement),
         _ => None,
     };
+    let displacement = moved.map(|values| io::gltf::VertexScalar {
+        attribute: "_DISPLACEMENT",
+        quantity: "distance each vertex moved from the input (develop loop: from the \
+                   subdivided mesh), mesh units",
+        values,
+    });
     push_mesh(&mut out, "mesh", mesh, &varpi, displacement.as_slice());
     if let Some(p) = &outcome.patterns {
         out.push(Artifact {

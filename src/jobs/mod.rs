@@ -9,7 +9,8 @@
 pub mod artifacts;
 
 use crate::algorithms::{
-    self, fl_mesh, flatten, parse_params, perturb, report_job, subdivide, AlgoError, Control,
+    self, develop, fl_mesh, flatten, parse_params, perturb, report_job, subdivide, AlgoError,
+    Control,
 };
 use crate::mesh::Mesh;
 use serde::Serialize;
@@ -27,6 +28,8 @@ pub enum Kind {
     Subdivide,
     /// Local flattenable perturbation against a reference body.
     Perturb,
+    /// Developability by minimum deformation (Wang–Tang, Su et al.).
+    Develop,
 }
 
 /// Whether a kind takes a reference body (`reference_mesh_id`, `--reference`).
@@ -42,12 +45,13 @@ pub enum Reference {
 
 impl Kind {
     /// Every kind, in the order the CLI and the API list them.
-    pub const ALL: [Kind; 5] = [
+    pub const ALL: [Kind; 6] = [
         Kind::Report,
         Kind::Flatten,
         Kind::FlMesh,
         Kind::Subdivide,
         Kind::Perturb,
+        Kind::Develop,
     ];
 
     /// The kind's name in requests, on the command line and in the API.
@@ -58,6 +62,7 @@ impl Kind {
             Kind::FlMesh => "fl-mesh",
             Kind::Subdivide => "subdivide",
             Kind::Perturb => "perturb",
+            Kind::Develop => "develop",
         }
     }
 
@@ -91,6 +96,12 @@ impl Kind {
                 "flattenable perturbation (Sec. 4 of Wang's FL meshes): the closest flattenable \
                  mesh, never into the reference body (global: whole-mesh SQP; local: the \
                  paper's Algorithm 2)"
+            }
+            Kind::Develop => {
+                "developability by minimum deformation (Wang and Tang): every edge kept as close \
+                 to its input length as θ = 2π at every interior vertex allows (global: exact \
+                 SQP or the paper's penalty CG; local: moves along the normals; loop: Su et al., \
+                 Loop subdivision first, also writes level_<k>.*)"
             }
         }
     }
@@ -129,13 +140,25 @@ impl Kind {
                  stall_outer (local: 10), max_outer (local: 50), parallel=true|false (local: \
                  true; false: the paper's strict heap order)"
             }
+            Kind::Develop => {
+                "method=global|local|loop (global), tolerance (g_max in rad: 1e-6 for global and \
+                 loop, 1e-4 for local), d_tolerance (where D[M] is reported: [1e-6, 1e-4, 1e-3, \
+                 1e-2]), solver=sqp|penalty_cg (global and loop: sqp), max_iterations (global \
+                 and loop: 200), fix_boundary=true|false (global and loop: false), closeness \
+                 (sqp: 1e-2), step_tolerance (sqp: 1e-4), stall_iterations (sqp: 40), eta \
+                 (penalty_cg: 1e-4), cg_steps (penalty_cg: 5), delta_t (local: the mean edge \
+                 length), max_moves (local: 500000), update=gauss_newton|newton (local: \
+                 gauss_newton), relaxation (local gauss_newton: 1.8), levels (loop: 1)"
+            }
         }
     }
 
     /// Whether it takes a reference body.
     pub fn reference(self) -> Reference {
         match self {
-            Kind::Report | Kind::Flatten | Kind::FlMesh | Kind::Subdivide => Reference::None,
+            Kind::Report | Kind::Flatten | Kind::FlMesh | Kind::Subdivide | Kind::Develop => {
+                Reference::None
+            }
             Kind::Perturb => Reference::Optional,
         }
     }
@@ -168,6 +191,8 @@ pub enum JobSpec {
     Subdivide(subdivide::Params),
     /// `perturb`.
     Perturb(perturb::Params),
+    /// `develop`.
+    Develop(develop::Params),
 }
 
 impl JobSpec {
@@ -199,6 +224,11 @@ impl JobSpec {
                 p.check().map_err(SpecError::Params)?;
                 JobSpec::Perturb(p)
             }
+            Kind::Develop => {
+                let p: develop::Params = parse_params(params).map_err(SpecError::Params)?;
+                p.check().map_err(SpecError::Params)?;
+                JobSpec::Develop(p)
+            }
         })
     }
 
@@ -225,6 +255,7 @@ impl JobSpec {
             JobSpec::FlMesh(_) => Kind::FlMesh,
             JobSpec::Subdivide(_) => Kind::Subdivide,
             JobSpec::Perturb(_) => Kind::Perturb,
+            JobSpec::Develop(_) => Kind::Develop,
         }
     }
 
@@ -236,6 +267,7 @@ impl JobSpec {
             JobSpec::FlMesh(p) => serde_json::to_value(p),
             JobSpec::Subdivide(p) => serde_json::to_value(p),
             JobSpec::Perturb(p) => serde_json::to_value(p),
+            JobSpec::Develop(p) => serde_json::to_value(p),
         }
         .unwrap_or_default()
     }
@@ -258,6 +290,7 @@ impl JobSpec {
             JobSpec::Perturb(p) => {
                 perturb::run(mesh, input.reference.as_ref(), p, control)?.into_job(Figures::Perturb)
             }
+            JobSpec::Develop(p) => develop::run(mesh, p, control)?.into_job(Figures::Develop),
         })
     }
 }
@@ -285,6 +318,8 @@ pub enum Figures {
     Subdivide(subdivide::Summary),
     /// `perturb`.
     Perturb(perturb::Summary),
+    /// `develop`.
+    Develop(develop::Summary),
 }
 
 impl Figures {
@@ -295,6 +330,7 @@ impl Figures {
             Figures::FlMesh(s) => Some(s.report.converged),
             Figures::Subdivide(s) => Some(s.converged),
             Figures::Perturb(s) => Some(s.converged),
+            Figures::Develop(s) => Some(s.converged),
         }
     }
 
@@ -305,6 +341,7 @@ impl Figures {
             Figures::FlMesh(s) => Some(&s.report.stop_reason),
             Figures::Subdivide(s) => s.stop_reason.as_deref(),
             Figures::Perturb(s) => Some(&s.stop_detail),
+            Figures::Develop(s) => Some(&s.stop_detail),
         }
     }
 
@@ -315,6 +352,7 @@ impl Figures {
             Figures::FlMesh(s) => &s.report.stuck_vertices,
             Figures::Subdivide(s) => &s.stuck_vertices,
             Figures::Perturb(s) => &s.stuck_vertices,
+            Figures::Develop(s) => &s.stuck_vertices,
         }
     }
 
@@ -323,7 +361,10 @@ impl Figures {
         match self {
             Figures::Flatten(s) => &s.job_warnings,
             Figures::Perturb(s) => &s.warnings,
-            Figures::Report(_) | Figures::FlMesh(_) | Figures::Subdivide(_) => &[],
+            Figures::Report(_)
+            | Figures::FlMesh(_)
+            | Figures::Subdivide(_)
+            | Figures::Develop(_) => &[],
         }
     }
 }

@@ -1,0 +1,569 @@
+//! The `develop` job: developability by minimum deformation. Keep every edge as close as
+//! possible to its input length while driving each interior angle sum to 2π
+//! (wang-tang-developability-by-minimum-deformation, Sec. 3–6; su-shape-preserved-developability).
+//!
+//! - `method = "global"` (default): min E = Σ_e (l_e − l⁰_e)² subject to θ = 2π at every
+//!   interior vertex (Eq. 8). `solver = "sqp"` (default, beyond the paper; `sqp.rs`) solves it
+//!   exactly to g_max ≤ 1e-6; `solver = "penalty_cg"` is the paper's penalty J = E + (ρ/2)G²
+//!   with its ρ schedule and 5 CG steps per ρ (`cg.rs`).
+//! - `method = "local"`: the paper's heap-driven moves along fixed normals within ±δ_T
+//!   (Sec. 5, `local.rs`).
+//! - `method = "loop"`: Su et al.: `levels` of Loop subdivision (`loop_subdivision.rs`), then
+//!   the global method against the subdivided mesh's edge lengths; reports their Table 1.
+//!
+//! The mesh is welded: a seam vertex is one position, so G0 continuity across seams is exact
+//! (Sec. 4.2's linked vertex sets are implicit), and it is not interior, so g = 0 there
+//! (Eq. 5). `global` moves every vertex unless `fix_boundary` (then boundary and seam vertices
+//! stay bit-identical); `local` never moves them (Sec. 5.2). An input already within the
+//! tolerance comes back unchanged after 0 iterations. Choices where the papers are vague
+//! follow ../shared/notes/paper-notes.md parts B and C (stop on |g| not g², analytic
+//! gradients, the CG sign, ρ per phase, D at named tolerances).
+
+mod cg;
+pub mod energy;
+mod local;
+mod loop_subdivision;
+mod sqp;
+
+pub use local::{t_and_slope, vertex_normals_unweighted};
+pub use loop_subdivision::loop_subdivide;
+
+use super::{AlgoError, Control, Distance, Outcome};
+use crate::mesh::Mesh;
+use energy::{big_g, g_max, Model};
+use serde::{Deserialize, Serialize};
+
+/// Which method runs.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    /// Eq. 8 on the whole mesh (Sec. 4).
+    #[default]
+    Global,
+    /// Heap-driven moves along the original normals (Sec. 5).
+    Local,
+    /// Loop subdivision, then `global` against its edge lengths (Su et al.).
+    Loop,
+}
+
+/// The solver of `global` and `loop`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Solver {
+    /// min E + closeness s.t. θ = 2π, by SQP (exactly flattenable).
+    #[default]
+    Sqp,
+    /// The paper's penalty J = E + (ρ/2) G² with conjugate gradients.
+    PenaltyCg,
+}
+
+/// The update of `local`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Update {
+    /// Gauss–Newton on the residuals, accepted only when T falls.
+    #[default]
+    GaussNewton,
+    /// The paper's Eq. 19, δ ← δ − T/Ṫ.
+    Newton,
+}
+
+/// Parameters of `develop` (defaults are the papers' unless said otherwise).
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Params {
+    /// `global` (default), `local` or `loop`.
+    pub method: Method,
+    /// `global`/`loop`: `sqp` (default) or `penalty_cg` (the paper's).
+    pub solver: Solver,
+    /// Target g_max in radians; none: 1e-6 for `global` and `loop`, the paper's ε = 1e-4 for
+    /// `local`.
+    pub tolerance: Option<f64>,
+    /// `global`/`loop`: most outer iterations (ρ phases) for `penalty_cg`, Newton iterations
+    /// for `sqp`.
+    pub max_iterations: usize,
+    /// `global`/`loop`: keep boundary and seam vertices where they are.
+    pub fix_boundary: bool,
+    /// `penalty_cg`: stop when |G[Mⁱ] − G[Mⁱ⁻¹]| / G[M⁰] < eta.
+    pub eta: f64,
+    /// `penalty_cg`: CG steps per ρ.
+    pub cg_steps: usize,
+    /// `sqp`: weight μ of Σ|v − v⁰|² beside E (both over h̄²).
+    pub closeness: f64,
+    /// `sqp`: once flattenable, stop when a step moves no vertex more than this many mean
+    /// edge lengths.
+    pub step_tolerance: f64,
+    /// `sqp`: iterations without g_max halving that end an unflattenable run.
+    pub stall_iterations: usize,
+    /// `local`: largest offset δ_T along a normal, mesh units; none: the mean edge length L̄.
+    pub delta_t: Option<f64>,
+    /// `local`: most heap pops (N_max).
+    pub max_moves: usize,
+    /// `local`: `gauss_newton` (default) or `newton` (the paper's Eq. 19).
+    pub update: Update,
+    /// `local`, `gauss_newton`: over-relaxation ω of each move, in (0, 2).
+    pub relaxation: f64,
+    /// `loop`: Loop subdivision levels.
+    pub levels: usize,
+    /// Tolerances (radians) at which D[M] is reported.
+    pub d_tolerance: Vec<f64>,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Params {
+            method: Method::Global,
+            solver: Solver::Sqp,
+            tolerance: None,
+            max_iterations: 200,
+            fix_boundary: false,
+            eta: 1e-4,
+            cg_steps: 5,
+            closeness: 1e-2,
+            step_tolerance: 1e-4,
+            stall_iterations: 40,
+            delta_t: None,
+            max_moves: 500_000,
+            update: Update::GaussNewton,
+            relaxation: 1.8,
+            levels: 1,
+            d_tolerance: vec![1e-6, 1e-4, 1e-3, 1e-2],
+        }
+    }
+}
+
+fn bad(key: &str, message: &str) -> AlgoError {
+    AlgoError::InvalidParam {
+        key: key.into(),
+        message: message.into(),
+    }
+}
+
+impl Params {
+    /// The tolerance in force.
+    pub fn tolerance(&self) -> f64 {
+        self.tolerance.unwrap_or(match self.method {
+            Method::Global | Method::Loop => crate::geometry::DEVELOPABLE_TOLERANCE,
+            Method::Local => 1e-4,
+        })
+    }
+
+    /// Check ranges.
+    pub fn check(&self) -> Result<(), AlgoError> {
+        if !(self.tolerance() > 0.0 && self.tolerance() < 1.0) {
+            return Err(bad("tolerance", "must be in (0, 1) rad"));
+        }
+        if !(1..=100_000).contains(&self.max_iterations) {
+            return Err(bad("max_iterations", "must be in 1..=100000"));
+        }
+        if !(self.eta > 0.0 && self.eta < 1.0) {
+            return Err(bad("eta", "must be in (0, 1)"));
+        }
+        if !(1..=1000).contains(&self.cg_steps) {
+            return Err(bad("cg_steps", "must be in 1..=1000"));
+        }
+        if !(self.closeness > 0.0 && self.closeness.is_finite()) {
+            return Err(bad(
+                "closeness",
+                "must be finite and > 0 (it makes the problem well posed)",
+            ));
+        }
+        if !(self.step_tolerance > 0.0 && self.step_tolerance < 1.0) {
+            return Err(bad("step_tolerance", "must be in (0, 1)"));
+        }
+        if !(2..=1000).contains(&self.stall_iterations) {
+            return Err(bad("stall_iterations", "must be in 2..=1000"));
+        }
+        if let Some(d) = self.delta_t {
+            if !(d >= 0.0 && d.is_finite()) {
+                return Err(bad("delta_t", "must be a finite distance ≥ 0 (mesh units)"));
+            }
+        }
+        if !(self.relaxation > 0.0 && self.relaxation < 2.0) {
+            return Err(bad("relaxation", "must be in (0, 2)"));
+        }
+        if !(1..=100_000_000).contains(&self.max_moves) {
+            return Err(bad("max_moves", "must be in 1..=100000000"));
+        }
+        if !(1..=4).contains(&self.levels) {
+            return Err(bad(
+                "levels",
+                "must be in 1..=4 (each level has 4× the faces)",
+            ));
+        }
+        if self.d_tolerance.is_empty()
+            || self.d_tolerance.len() > 16
+            || self.d_tolerance.iter().any(|t| !(*t > 0.0 && *t < 1.0))
+        {
+            return Err(bad(
+                "d_tolerance",
+                "must be a list of 1 to 16 tolerances in (0, 1) rad",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Why the run stopped.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Stop {
+    /// g_max within the tolerance (`sqp`: and the step below `step_tolerance`).
+    #[default]
+    Tolerance,
+    /// `penalty_cg`: the relative change of G fell below η.
+    Eta,
+    /// The iteration budget ran out.
+    MaxIterations,
+    /// `sqp`: g_max did not halve within `stall_iterations`.
+    Stall,
+    /// No step lowered the objective (`penalty_cg`: J; `sqp`: the merit).
+    LineSearch,
+    /// `local`: only stalled vertices are above ε.
+    Stalled,
+    /// `local`: `max_moves` pops.
+    MaxMoves,
+}
+
+impl Stop {
+    /// The wire name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Stop::Tolerance => "tolerance",
+            Stop::Eta => "eta",
+            Stop::MaxIterations => "max_iterations",
+            Stop::Stall => "stall",
+            Stop::LineSearch => "line_search",
+            Stop::Stalled => "stalled",
+            Stop::MaxMoves => "max_moves",
+        }
+    }
+}
+
+/// One iteration of `global` (a ρ phase of `penalty_cg`, a Newton step of `sqp`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct HistoryEntry {
+    /// Iteration (1-based).
+    pub iteration: usize,
+    /// g_max (= ϖ_max) after it.
+    pub max_flattenability: f64,
+    /// G after it.
+    pub big_g: f64,
+    /// E after it.
+    pub e: f64,
+    /// `penalty_cg`: the phase's ρ.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rho: Option<f64>,
+    /// `penalty_cg`: CG steps taken in the phase.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cg_steps: Option<usize>,
+    /// `sqp`: step length taken.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub step_length: Option<f64>,
+}
+
+/// What a method reached, before the figures are measured.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct Run {
+    pub positions: Vec<[f64; 3]>,
+    pub iterations: usize,
+    pub inner: usize,
+    pub evaluations: usize,
+    pub best_iteration: usize,
+    pub stop: Stop,
+    pub stop_detail: String,
+    pub history: Vec<HistoryEntry>,
+    pub g_max: f64,
+    pub g_max_input: f64,
+    pub stalled: Vec<u32>,
+}
+
+impl Run {
+    fn new(start: &[[f64; 3]], g_max: f64) -> Self {
+        Run {
+            positions: start.to_vec(),
+            g_max,
+            g_max_input: g_max,
+            ..Run::default()
+        }
+    }
+}
+
+/// D[M] at one tolerance, before and after.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct DAt {
+    /// |2π − θ| at or below this counts as developable.
+    pub tolerance: f64,
+    /// D of the input (for `loop`: of the control mesh M₀).
+    pub before: f64,
+    /// D of the output.
+    pub after: f64,
+}
+
+/// Su et al.'s Table 1 for a `loop` run (its header's G means D: paper-notes C.3.1).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct LoopTable {
+    /// Subdivision levels.
+    pub levels: usize,
+    /// Vertices of M₀ and of each level.
+    pub vertices: Vec<usize>,
+    /// Per tolerance of `d_tolerance`: D[M₀], D[M_L], D[M_R] and δD (percent; null when
+    /// D[M_L] = 0).
+    pub rows: Vec<LoopRow>,
+    /// δS = Σ|l − l⁰| / Σ l⁰ between M_L (l⁰) and M_R (l).
+    pub delta_s: f64,
+    /// G of M₀, M_L, M_R.
+    pub big_g: [f64; 3],
+    /// g_max of M₀, M_L, M_R.
+    pub g_max: [f64; 3],
+    /// Hausdorff distance between M_L and M_R.
+    pub hausdorff_ml_mr: Distance,
+}
+
+/// One tolerance's row of [`LoopTable`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct LoopRow {
+    /// The tolerance.
+    pub tolerance: f64,
+    /// D[M₀].
+    pub d_m0: f64,
+    /// D[M_L].
+    pub d_ml: f64,
+    /// D[M_R].
+    pub d_mr: f64,
+    /// δD = (D[M_R] − D[M_L]) / D[M_L], percent.
+    pub delta_d: Option<f64>,
+}
+
+/// The figures of a `develop` run.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Summary {
+    /// The method that ran.
+    pub method: Method,
+    /// The solver (`global`, `loop`).
+    pub solver: Option<Solver>,
+    /// g_max of the output within the tolerance.
+    pub converged: bool,
+    /// Why it stopped.
+    pub stop_reason: Stop,
+    /// The stop in words.
+    pub stop_detail: String,
+    /// Outer iterations (`penalty_cg`), Newton iterations (`sqp`) or heap pops (`local`).
+    pub iterations: usize,
+    /// CG steps (`penalty_cg`), moves tried (`local`); 0 for `sqp`.
+    pub inner_steps: usize,
+    /// The iteration whose positions are returned (0: the start).
+    pub best_iteration: usize,
+    /// The tolerance in force.
+    pub tolerance: f64,
+    /// g⁰_max: max |2π − θ| over interior vertices of the start (for `loop`: of M_L).
+    pub g_max_before: f64,
+    /// g*_max of the output.
+    pub g_max_after: f64,
+    /// G (Eq. 4) of the start and the output.
+    pub big_g_before: f64,
+    /// See `big_g_before`.
+    pub big_g_after: f64,
+    /// E (Eq. 7) of the output against the rest lengths (the start's: 0 before).
+    pub e_after: f64,
+    /// D[M] before and after at each of `d_tolerance`.
+    pub d: Vec<DAt>,
+    /// δS = Σ|l − l⁰| / Σ l⁰ against the rest lengths.
+    pub delta_s: f64,
+    /// Hausdorff distance from the output to the input.
+    pub hausdorff_to_input: Distance,
+    /// Largest displacement of a vertex from the start.
+    pub max_displacement: f64,
+    /// Displacement of every vertex from the start (for `loop`: from M_L).
+    pub displacement: Vec<f64>,
+    /// Interior vertices still above the tolerance, worst first.
+    pub stuck_vertices: Vec<u32>,
+    /// `local`: vertices stalled above ε at the end (refused or clamped moves), worst first.
+    pub stalled_vertices: Vec<u32>,
+    /// Interior vertices of closed components with Euler characteristic ≠ 0 (Gauss–Bonnet:
+    /// they cannot all reach 2π); left out of g.
+    pub impossible_vertices: usize,
+    /// Per iteration (`global`, `loop`).
+    pub history: Vec<HistoryEntry>,
+    /// `loop`: Su et al.'s Table 1.
+    pub table: Option<LoopTable>,
+}
+
+/// δD of Su et al.'s Table 1, percent: (D[M_R] − D[M_L]) / D[M_L] × 100; None when D[M_L] = 0.
+pub fn delta_d(d_ml: f64, d_mr: f64) -> Option<f64> {
+    (d_ml > 0.0).then(|| (d_mr - d_ml) / d_ml * 100.0)
+}
+
+/// δS = Σ|l − l⁰| / Σ l⁰ (0 when every l⁰ is 0).
+pub fn delta_s(rest: &[f64], lengths: &[f64]) -> f64 {
+    let total: f64 = rest.iter().sum();
+    if total <= 0.0 {
+        return 0.0;
+    }
+    rest.iter()
+        .zip(lengths)
+        .map(|(a, b)| (a - b).abs())
+        .sum::<f64>()
+        / total
+}
+
+/// D[M] (Eq. 2) at `tolerance`.
+pub fn developability(mesh: &Mesh, tolerance: f64) -> f64 {
+    let theta = crate::geometry::angle_sums(mesh);
+    let varpi = crate::geometry::flattenability(mesh, &theta);
+    let area = crate::geometry::vertex_areas(mesh, &crate::geometry::face_areas(mesh));
+    crate::geometry::developability_d(&varpi, &area, tolerance)
+}
+
+/// Run `develop`.
+pub fn run(
+    mesh: &Mesh,
+    params: &Params,
+    control: &dyn Control,
+) -> Result<Outcome<Summary>, AlgoError> {
+    params.check()?;
+    let mut levels = Vec::new();
+    let start = match params.method {
+        Method::Loop => {
+            let mut m = mesh.clone();
+            for _ in 0..params.levels {
+                if control.cancelled() {
+                    return Err(AlgoError::Cancelled);
+                }
+                m = Mesh::new(loop_subdivide(&m))
+                    .map_err(|e| AlgoError::Input(format!("Loop subdivision: {e}")))?
+                    .0;
+                levels.push(m.clone());
+            }
+            m
+        }
+        Method::Global | Method::Local => mesh.clone(),
+    };
+    let model = Model::new(&start);
+    let nv = start.num_vertices();
+    let movable: Vec<bool> = (0..nv as u32)
+        .map(|v| match start.conn().kind(v) {
+            crate::mesh::VertexKind::Unreferenced => false,
+            crate::mesh::VertexKind::Interior => true,
+            _ => !params.fix_boundary,
+        })
+        .collect();
+    let run = match (params.method, params.solver) {
+        (Method::Local, _) => local::run(&model, start.positions(), params, control)?,
+        (_, Solver::Sqp) => sqp::run(&model, start.positions(), &movable, params, control)?,
+        (_, Solver::PenaltyCg) => cg::run(&model, start.positions(), &movable, params, control)?,
+    };
+    let out = start
+        .with_positions(run.positions.clone())
+        .map_err(|e| AlgoError::Input(format!("the optimised mesh is invalid: {e}")))?;
+    let summary = summarise(mesh, &levels, &start, &out, &model, &run, params);
+    Ok(Outcome {
+        mesh: Some(out),
+        patterns: None,
+        summary,
+        levels,
+    })
+}
+
+/// The figures, measured on the meshes (not taken from the solver).
+fn summarise(
+    input: &Mesh,
+    levels: &[Mesh],
+    start: &Mesh,
+    out: &Mesh,
+    model: &Model<'_>,
+    run: &Run,
+    params: &Params,
+) -> Summary {
+    let nv = start.num_vertices();
+    let mut g0 = vec![0.0; nv];
+    let mut g1 = vec![0.0; nv];
+    model.g(start.positions(), &mut g0);
+    model.g(out.positions(), &mut g1);
+    let tol = params.tolerance();
+    let displacement: Vec<f64> = start
+        .positions()
+        .iter()
+        .zip(out.positions())
+        .map(|(&a, &b)| {
+            let d = crate::mesh::sub(a, b);
+            crate::mesh::dot(d, d).sqrt()
+        })
+        .collect();
+    let mut stuck: Vec<u32> = (0..nv as u32)
+        .filter(|&v| g1[v as usize].abs() > tol)
+        .collect();
+    stuck.sort_by(|a, b| g1[*b as usize].abs().total_cmp(&g1[*a as usize].abs()));
+    let lengths = energy::edge_lengths(out, out.positions());
+    let d = params
+        .d_tolerance
+        .iter()
+        .map(|&t| DAt {
+            tolerance: t,
+            before: developability(input, t),
+            after: developability(out, t),
+        })
+        .collect();
+    let table = (params.method == Method::Loop).then(|| {
+        let vertices = std::iter::once(input)
+            .chain(levels)
+            .map(Mesh::num_vertices)
+            .collect();
+        let mut g_in = vec![0.0; input.num_vertices()];
+        Model::new(input).g(input.positions(), &mut g_in);
+        LoopTable {
+            levels: params.levels,
+            vertices,
+            rows: params
+                .d_tolerance
+                .iter()
+                .map(|&t| {
+                    let (d_ml, d_mr) = (developability(start, t), developability(out, t));
+                    LoopRow {
+                        tolerance: t,
+                        d_m0: developability(input, t),
+                        d_ml,
+                        d_mr,
+                        delta_d: delta_d(d_ml, d_mr),
+                    }
+                })
+                .collect(),
+            delta_s: delta_s(model.rest(), &lengths),
+            big_g: [big_g(&g_in), big_g(&g0), big_g(&g1)],
+            g_max: [g_max(&g_in), g_max(&g0), g_max(&g1)],
+            hausdorff_ml_mr: Distance::hausdorff(out, start),
+        }
+    });
+    Summary {
+        method: params.method,
+        solver: (params.method != Method::Local).then_some(params.solver),
+        converged: g_max(&g1) <= tol,
+        stop_reason: run.stop,
+        stop_detail: if run.stop_detail.is_empty() {
+            run.stop.as_str().to_string()
+        } else {
+            run.stop_detail.clone()
+        },
+        iterations: run.iterations,
+        inner_steps: run.inner,
+        best_iteration: run.best_iteration,
+        tolerance: tol,
+        g_max_before: g_max(&g0),
+        g_max_after: g_max(&g1),
+        big_g_before: big_g(&g0),
+        big_g_after: big_g(&g1),
+        e_after: model.e(out.positions()),
+        d,
+        delta_s: delta_s(model.rest(), &lengths),
+        hausdorff_to_input: Distance::hausdorff(out, input),
+        max_displacement: displacement.iter().copied().fold(0.0, f64::max),
+        displacement,
+        stuck_vertices: stuck,
+        stalled_vertices: run.stalled.clone(),
+        impossible_vertices: (0..nv)
+            .filter(|&v| start.conn().is_interior(v as u32) && !model.is_interior(v))
+            .count(),
+        history: run.history.clone(),
+        table,
+    }
+}

@@ -1,0 +1,487 @@
+//! `solver = "sqp"` (the default, beyond the paper; paper-notes B.8 (c)): Eq. 8 itself,
+//! min E subject to θ_i = 2π at every interior vertex, by sequential quadratic programming
+//! instead of a penalty, so that the answer is exactly flattenable (g_max ≤ 1e-6) where the
+//! paper's penalty runs all stall near 1e-3 (its Table 1).
+//!
+//! Objective f = (E + μ Σ_v |v − v⁰|²) / h̄², μ = `closeness` (default 1e-2): E alone is blind
+//! to rigid motions and to every isometric bending, so its Hessian is singular; the small pull
+//! to the input picks, among the minimum-deformation answers, the one nearest the input. Each
+//! iteration solves the KKT system
+//!
+//! ```text
+//! [ H   Λᵀ ] [δ]   [ −∇f    ]
+//! [ Λ  −εI ] [y] = [ 2π − θ ]
+//! ```
+//!
+//! with H the Gauss–Newton Hessian of f (2 u uᵀ per edge, u its unit direction, plus 2μ I) and
+//! Λ = ∂θ/∂v (FL Props. 1–2), in units of h̄ so that all blocks are O(1). The pattern is fixed,
+//! so the symbolic factorisation (AMD on the vertex graph, a vertex's x, y, z and y kept
+//! together) is computed once and only the numeric LDLᵀ every iteration. Steps are accepted
+//! by the ℓ1 merit f + ν Σ|2π − θ| (ν ≥ 2‖y‖∞, Nocedal–Wright 18.3) with Armijo backtracking
+//! and, when the full step is refused, one second-order correction (a re-solve with the same
+//! factor against the constraint residual at the trial point: the Maratos effect). Trials that
+//! make a triangle degenerate are refused.
+//!
+//! Stop: converged when g_max ≤ `tolerance` and the step has fallen below `step_tolerance`
+//! h̄ (a stationary point of Eq. 8, not just the first flattenable iterate); `stall` when g_max
+//! has not halved in `stall_iterations`. The best iterate is returned: the feasible one with
+//! the least f, else the one with the least g_max.
+
+// Index loops over xyz read like the equations they implement.
+#![allow(clippy::needless_range_loop)]
+
+use super::energy::{g_max, Model};
+use super::{HistoryEntry, Params, Run, Stop};
+use crate::algorithms::{AlgoError, Control, Progress};
+use crate::geometry::corner_angle_gradient;
+use crate::linalg::LdltSolver;
+use crate::mesh::{dot, is_degenerate_triangle, sub, NONE};
+
+/// The (2,2) block −εI: keeps the system solvable where a constraint's gradient vanishes
+/// (a planar vertex, where θ is stationary at 2π), biasing θ by at most ε|y|.
+const REGULARISATION: f64 = 1e-10;
+const ARMIJO: f64 = 1e-4;
+const MAX_HALVINGS: usize = 30;
+/// Levenberg–Marquardt damping added to H's diagonal (units of h̄⁻²·h̄², so a damping of 1
+/// makes moving a vertex by h̄ cost as much as stretching an edge by h̄): it shortens steps
+/// where θ's linearisation is poor and vanishes where full steps are taken, so the fixed point
+/// is unchanged (it is not in the gradient).
+const DAMPING_START: f64 = 1.0;
+const DAMPING_MIN: f64 = 1e-8;
+const DAMPING_MAX: f64 = 1e8;
+
+/// Run the SQP from the input positions `v0` (also the closeness anchor).
+pub(super) fn run(
+    model: &Model<'_>,
+    v0: &[[f64; 3]],
+    movable: &[bool],
+    params: &Params,
+    control: &dyn Control,
+) -> Result<Run, AlgoError> {
+    let tol = params.tolerance();
+    let mut g = vec![0.0; v0.len()];
+    model.g(v0, &mut g);
+    let mut run = Run::new(v0, g_max(&g));
+    if run.g_max <= tol {
+        run.stop = Stop::Tolerance;
+        return Ok(run);
+    }
+    let mut kkt = Kkt::new(model, movable)?;
+    let cons = kkt.cons.clone();
+    let h = crate::geometry::mean_edge_length(model.mesh());
+    let mu = params.closeness;
+    let f_of = |pos: &[[f64; 3]]| {
+        let c: f64 = pos
+            .iter()
+            .zip(v0)
+            .map(|(p, q)| {
+                let d = sub(*p, *q);
+                dot(d, d)
+            })
+            .sum();
+        (model.e(pos) + mu * c) / (h * h)
+    };
+    let mut pos = v0.to_vec();
+    let mut trial = v0.to_vec();
+    let mut trial_g = g.clone();
+    let mut grad_e = vec![[0.0; 3]; v0.len()];
+    let mut f = f_of(&pos);
+    let mut nu = 0.0f64;
+    let mut damping = DAMPING_START;
+    let mut best_f = f64::INFINITY;
+    let mut since_halving = 0;
+    let mut stall_ref = run.g_max;
+    for it in 1..=params.max_iterations {
+        if control.cancelled() {
+            return Err(AlgoError::Cancelled);
+        }
+        model.e_gradient(&pos, &mut grad_e);
+        kkt.fill(model, &pos, mu + damping)?;
+        let rhs = &mut kkt.rhs;
+        rhs.fill(0.0);
+        for (s, &v) in kkt.verts.iter().enumerate() {
+            let v = v as usize;
+            for k in 0..3 {
+                rhs[3 * s + k] = -(grad_e[v][k] + 2.0 * mu * (pos[v][k] - v0[v][k])) / h;
+            }
+        }
+        for (c, &v) in kkt.cons.iter().enumerate() {
+            rhs[3 * kkt.m + c] = g[v as usize];
+        }
+        let slope_f: f64;
+        {
+            kkt.solve()?;
+            let (step, y) = kkt.rhs.split_at(3 * kkt.m);
+            slope_f = kkt
+                .verts
+                .iter()
+                .enumerate()
+                .map(|(s, &v)| {
+                    let v = v as usize;
+                    (0..3)
+                        .map(|k| {
+                            (grad_e[v][k] + 2.0 * mu * (pos[v][k] - v0[v][k])) / h * step[3 * s + k]
+                        })
+                        .sum::<f64>()
+                })
+                .sum();
+            let ymax = y.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+            nu = nu.max(2.0 * ymax + 1e-8);
+            kkt.step.copy_from_slice(step);
+        }
+        let l1 = |g: &[f64]| cons.iter().map(|&v| g[v as usize].abs()).sum::<f64>();
+        let phi0 = f + nu * l1(&g);
+        let slope = slope_f - nu * l1(&g);
+        let step_max = kkt
+            .step
+            .chunks(3)
+            .map(|d| (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt())
+            .fold(0.0, f64::max);
+        // Line search on the merit, with one second-order correction for the full step.
+        let mut alpha = 1.0;
+        let mut accepted = None;
+        for halving in 0..=MAX_HALVINGS {
+            kkt.place(&pos, alpha, h, &mut trial);
+            if let Some(ft) = evaluate(model, &trial, &mut trial_g, &f_of) {
+                if ft + nu * l1(&trial_g) <= phi0 + ARMIJO * alpha * slope {
+                    accepted = Some((alpha, ft));
+                    break;
+                }
+                if halving == 0 {
+                    // Second-order correction: same factor, right-hand side [0; 2π − θ(trial)].
+                    kkt.correct(&trial_g)?;
+                    kkt.place_corrected(&pos, h, &mut trial);
+                    if let Some(ft) = evaluate(model, &trial, &mut trial_g, &f_of) {
+                        if ft + nu * l1(&trial_g) <= phi0 + ARMIJO * slope {
+                            accepted = Some((1.0, ft));
+                            break;
+                        }
+                    }
+                }
+            }
+            alpha *= 0.5;
+        }
+        let Some((alpha, ft)) = accepted else {
+            run.iterations = it;
+            if damping >= DAMPING_MAX {
+                run.stop = Stop::LineSearch;
+                break;
+            }
+            damping = (damping * 16.0).min(DAMPING_MAX);
+            continue;
+        };
+        damping = if alpha == 1.0 {
+            (damping / 4.0).max(DAMPING_MIN)
+        } else if alpha <= 0.25 {
+            (damping * 4.0).min(DAMPING_MAX)
+        } else {
+            damping
+        };
+        std::mem::swap(&mut pos, &mut trial);
+        std::mem::swap(&mut g, &mut trial_g);
+        f = ft;
+        let gm = g_max(&g);
+        run.iterations = it;
+        run.history.push(HistoryEntry {
+            iteration: it,
+            max_flattenability: gm,
+            big_g: super::energy::big_g(&g),
+            e: model.e(&pos),
+            rho: None,
+            cg_steps: None,
+            step_length: Some(alpha),
+        });
+        control.progress(&Progress {
+            stage: "sqp".into(),
+            iteration: it,
+            max_flattenability: Some(gm),
+            step_norm: Some(alpha * step_max),
+        });
+        let feasible = gm <= tol;
+        let improves = if feasible {
+            run.g_max > tol || f < best_f
+        } else {
+            run.g_max > tol && gm < run.g_max
+        };
+        if improves {
+            run.g_max = gm;
+            run.best_iteration = it;
+            run.positions.copy_from_slice(&pos);
+            if feasible {
+                best_f = f;
+            }
+        }
+        if feasible && alpha * step_max <= params.step_tolerance {
+            run.stop = Stop::Tolerance;
+            break;
+        }
+        if gm <= 0.5 * stall_ref {
+            stall_ref = gm;
+            since_halving = 0;
+        } else if !feasible {
+            since_halving += 1;
+            if since_halving >= params.stall_iterations {
+                run.stop = Stop::Stall;
+                break;
+            }
+        }
+        run.stop = Stop::MaxIterations;
+    }
+    if run.g_max <= tol && run.stop != Stop::Tolerance {
+        // Flattenable but not yet stationary: still a usable answer; say so.
+        run.stop_detail = format!(
+            "flattenable after {} iterations, not yet stationary ({})",
+            run.best_iteration,
+            run.stop.as_str()
+        );
+    }
+    Ok(run)
+}
+
+/// f at `pos` and g into `g`, or None when a triangle is degenerate or a value not finite.
+fn evaluate(
+    model: &Model<'_>,
+    pos: &[[f64; 3]],
+    g: &mut [f64],
+    f_of: &dyn Fn(&[[f64; 3]]) -> f64,
+) -> Option<f64> {
+    if model.mesh().triangles().iter().any(|t| {
+        let [a, b, c] = t.map(|v| pos[v as usize]);
+        is_degenerate_triangle(a, b, c)
+    }) {
+        return None;
+    }
+    model.g(pos, g);
+    let f = f_of(pos);
+    (f.is_finite() && g.iter().all(|x| x.is_finite())).then_some(f)
+}
+
+/// The KKT system of one mesh: fixed pattern, symbolic factorisation, value slots.
+struct Kkt {
+    /// Movable vertices (slot s ↔ vertex verts[s]) and constrained ones (row c ↔ cons[c]).
+    verts: Vec<u32>,
+    cons: Vec<u32>,
+    slot: Vec<u32>,
+    m: usize,
+    values: Vec<f64>,
+    /// Per slot: where its lower 3×3 block's six values start.
+    diag_at: Vec<usize>,
+    /// Per edge: where its 3×3 off-diagonal block starts (usize::MAX unless both ends move).
+    edge_at: Vec<usize>,
+    /// Per face corner (3f + k) with a constrained vertex: where Λ's three 3-value blocks
+    /// (the corner's vertex and the next two) start (usize::MAX for a fixed vertex).
+    corner_at: Vec<[usize; 3]>,
+    reg_at: usize,
+    solver: LdltSolver,
+    rhs: Vec<f64>,
+    step: Vec<f64>,
+    correction: Vec<f64>,
+}
+
+impl Kkt {
+    fn new(model: &Model<'_>, movable: &[bool]) -> Result<Self, AlgoError> {
+        let mesh = model.mesh();
+        let nv = mesh.num_vertices();
+        let mut slot = vec![NONE; nv];
+        let mut verts = Vec::new();
+        for v in 0..nv {
+            if movable[v] {
+                slot[v] = verts.len() as u32;
+                verts.push(v as u32);
+            }
+        }
+        let mut crow = vec![NONE; nv];
+        let mut cons = Vec::new();
+        for v in 0..nv {
+            if model.is_interior(v) && movable[v] {
+                crow[v] = cons.len() as u32;
+                cons.push(v as u32);
+            }
+        }
+        let m = verts.len();
+        let dim = 3 * m + cons.len();
+        let mut entries = Vec::new();
+        let mut diag_at = Vec::with_capacity(m);
+        for s in 0..m {
+            diag_at.push(entries.len());
+            for i in 0..3 {
+                for j in 0..=i {
+                    entries.push((3 * s + i, 3 * s + j));
+                }
+            }
+        }
+        let mut edge_at = Vec::with_capacity(mesh.conn().edges().len());
+        for e in mesh.conn().edges() {
+            let (sa, sb) = (slot[e[0] as usize], slot[e[1] as usize]);
+            if sa == NONE || sb == NONE || sa == sb {
+                edge_at.push(usize::MAX);
+                continue;
+            }
+            let (hi, lo) = (sa.max(sb) as usize, sa.min(sb) as usize);
+            edge_at.push(entries.len());
+            for i in 0..3 {
+                for j in 0..3 {
+                    entries.push((3 * hi + i, 3 * lo + j));
+                }
+            }
+        }
+        let mut corner_at = Vec::with_capacity(3 * mesh.num_faces());
+        for t in mesh.triangles() {
+            for k in 0..3 {
+                let a = t[k] as usize;
+                let mut at = [usize::MAX; 3];
+                if crow[a] != NONE {
+                    let r = 3 * m + crow[a] as usize;
+                    for (x, slot_x) in at.iter_mut().enumerate() {
+                        let s = slot[t[(k + x) % 3] as usize];
+                        if s != NONE {
+                            *slot_x = entries.len();
+                            for i in 0..3 {
+                                entries.push((r, 3 * s as usize + i));
+                            }
+                        }
+                    }
+                }
+                corner_at.push(at);
+            }
+        }
+        let reg_at = entries.len();
+        for c in 0..cons.len() {
+            entries.push((3 * m + c, 3 * m + c));
+        }
+        let signs = (0..dim).map(|i| if i < 3 * m { 1 } else { -1 }).collect();
+        let groups: Vec<u32> = (0..dim)
+            .map(|i| {
+                if i < 3 * m {
+                    (i / 3) as u32
+                } else {
+                    slot[cons[i - 3 * m] as usize]
+                }
+            })
+            .collect();
+        let solver = LdltSolver::new(dim, &entries, signs, Some(&groups))
+            .map_err(|e| AlgoError::Input(format!("KKT system: {e}")))?;
+        Ok(Kkt {
+            verts,
+            cons,
+            slot,
+            m,
+            values: vec![0.0; entries.len()],
+            diag_at,
+            edge_at,
+            corner_at,
+            reg_at,
+            solver,
+            rhs: vec![0.0; dim],
+            step: vec![0.0; 3 * m],
+            correction: vec![0.0; dim],
+        })
+    }
+
+    /// H (Gauss–Newton, times h̄²) and h̄Λ at `pos`, then the numeric factorisation.
+    fn fill(&mut self, model: &Model<'_>, pos: &[[f64; 3]], mu: f64) -> Result<(), AlgoError> {
+        let mesh = model.mesh();
+        let h = crate::geometry::mean_edge_length(mesh);
+        self.values.fill(0.0);
+        for &d in &self.diag_at {
+            // Lower 3×3 in the order (0,0), (1,0), (1,1), (2,0), (2,1), (2,2).
+            for idx in [0, 2, 5] {
+                self.values[d + idx] = 2.0 * mu;
+            }
+        }
+        for (e, ends) in mesh.conn().edges().iter().enumerate() {
+            let d = sub(pos[ends[0] as usize], pos[ends[1] as usize]);
+            let l = dot(d, d).sqrt();
+            if l == 0.0 {
+                continue;
+            }
+            let u = d.map(|x| x / l);
+            for &v in ends {
+                let s = self.slot[v as usize];
+                if s == NONE {
+                    continue;
+                }
+                let at = self.diag_at[s as usize];
+                let mut idx = 0;
+                for i in 0..3 {
+                    for j in 0..=i {
+                        self.values[at + idx] += 2.0 * u[i] * u[j];
+                        idx += 1;
+                    }
+                }
+            }
+            let at = self.edge_at[e];
+            if at != usize::MAX {
+                for i in 0..3 {
+                    for j in 0..3 {
+                        self.values[at + 3 * i + j] = -2.0 * u[i] * u[j];
+                    }
+                }
+            }
+        }
+        for (f, t) in mesh.triangles().iter().enumerate() {
+            for k in 0..3 {
+                let at = self.corner_at[3 * f + k];
+                if at == [usize::MAX; 3] {
+                    continue;
+                }
+                let p = [0, 1, 2].map(|x| pos[t[(k + x) % 3] as usize]);
+                let (gb, gc) = corner_angle_gradient(p[0], p[1], p[2]);
+                let grads = [
+                    [0, 1, 2].map(|i| -(gb[i] + gc[i]) * h),
+                    gb.map(|x| x * h),
+                    gc.map(|x| x * h),
+                ];
+                for (x, &a) in at.iter().enumerate() {
+                    if a != usize::MAX {
+                        self.values[a..a + 3].copy_from_slice(&grads[x]);
+                    }
+                }
+            }
+        }
+        for c in 0..self.cons.len() {
+            self.values[self.reg_at + c] = -REGULARISATION;
+        }
+        self.solver
+            .factor(&self.values)
+            .map_err(|e| AlgoError::Input(format!("KKT factorisation: {e}")))
+    }
+
+    /// Solve for the right-hand side in `rhs`, overwritten by the solution.
+    fn solve(&mut self) -> Result<(), AlgoError> {
+        self.solver
+            .solve_in_place(&mut self.rhs)
+            .map_err(|e| AlgoError::Input(format!("KKT solve: {e}")))
+    }
+
+    /// The second-order correction for constraint residual `g` (2π − θ at the trial point).
+    fn correct(&mut self, g: &[f64]) -> Result<(), AlgoError> {
+        self.correction.fill(0.0);
+        for (c, &v) in self.cons.iter().enumerate() {
+            self.correction[3 * self.m + c] = g[v as usize];
+        }
+        self.solver
+            .solve_in_place(&mut self.correction)
+            .map_err(|e| AlgoError::Input(format!("KKT solve: {e}")))
+    }
+
+    /// `out` = `pos` moved by α h̄ δ.
+    fn place(&self, pos: &[[f64; 3]], alpha: f64, h: f64, out: &mut [[f64; 3]]) {
+        out.copy_from_slice(pos);
+        for (s, &v) in self.verts.iter().enumerate() {
+            for k in 0..3 {
+                out[v as usize][k] += alpha * h * self.step[3 * s + k];
+            }
+        }
+    }
+
+    /// `out` = `pos` moved by h̄ (δ + correction).
+    fn place_corrected(&self, pos: &[[f64; 3]], h: f64, out: &mut [[f64; 3]]) {
+        out.copy_from_slice(pos);
+        for (s, &v) in self.verts.iter().enumerate() {
+            for k in 0..3 {
+                out[v as usize][k] += h * (self.step[3 * s + k] + self.correction[3 * s + k]);
+            }
+        }
+    }
+}
