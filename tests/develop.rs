@@ -375,11 +375,17 @@ fn penalty_cg_lowers_g_and_keeps_seams_welded() {
     let m = out.mesh.unwrap();
     let after = big_g_independent(&m, m.positions());
     assert!(after < 0.1 * before, "G {before} -> {after}");
-    assert!(out.summary.iterations > 0 && out.summary.inner_steps > 0);
-    // One position per seam vertex and both patches still use it: the output is the same
-    // welded connectivity, so G0 continuity holds by construction; check it still validates.
-    assert_eq!(m.triangles(), mesh.triangles());
-    assert_eq!(m.face_patch(), mesh.face_patch());
+    let summary = &out.summary;
+    assert!(summary.iterations > 0 && summary.inner_steps > 0);
+    assert_ne!(summary.stop_reason, Stop::LineSearch);
+    // G falls from phase to phase (paper-notes B.7.5), seen in the history.
+    for w in summary.history.windows(2) {
+        assert!(w[1].big_g <= w[0].big_g * (1.0 + 1e-9), "{:?}", w);
+    }
+    // Seam vertices are free (fix_boundary is false) and move; both patches use the one
+    // position of each, so the seam stays closed.
+    let seam = mesh.conn().shared_vertices();
+    assert!(seam.iter().any(|&v| m.position(v) != mesh.position(v)));
 }
 
 #[test]
@@ -448,11 +454,11 @@ fn local_moves_only_along_the_original_normals_within_delta_t() {
         assert!(moved > 0);
         let g = g_independent(&m, m.positions());
         let gmax = g.iter().fold(0.0f64, |a, x| a.max(x.abs()));
-        if out.summary.stop_reason == Stop::Tolerance {
-            assert!(gmax <= 1e-4, "stopped by ε with global g_max {gmax}");
-        } else {
-            assert!(gmax > 1e-4);
-            assert!(!out.summary.stuck_vertices.is_empty());
+        match out.summary.stop_reason {
+            Stop::Tolerance => assert!(gmax <= 1e-4, "stopped by ε with global g_max {gmax}"),
+            Stop::Stalled => assert!(!out.summary.stalled_vertices.is_empty()),
+            Stop::MaxMoves => {}
+            other => panic!("local stopped by {other:?}"),
         }
         let g0 = g_independent(&mesh, mesh.positions());
         let g0max = g0.iter().fold(0.0f64, |a, x| a.max(x.abs()));

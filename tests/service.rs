@@ -759,7 +759,6 @@ async fn perturb_job_end_to_end() {
     assert!(root["asset"]["extras"]["flatmesh"]["attributes"]["_DISPLACEMENT"].is_string());
 }
 
-/// A subdivide job with a curve on a rim edge, and one with a curve it must refuse.
 /// A develop job (Su et al.'s loop method): the table, every level downloadable, the output
 /// developable by angle sums recomputed here.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -814,6 +813,7 @@ async fn develop_job_end_to_end() {
     assert_eq!(p["field"], "params.relaxation", "{p}");
 }
 
+/// A subdivide job with a curve on a rim edge, and one with a curve it must refuse.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn subdivide_job_end_to_end() {
     let s = Server::start(&tmp("k-subdivide"), &[]);

@@ -9,8 +9,8 @@
 //! Alg. 3.5–3.6) written here because it is twenty lines on top of the J evaluation we need
 //! anyway; a crate's line search would want its own problem trait around the same closure.
 //! The first trial of a phase moves the farthest vertex by one mean edge length; later ones
-//! follow α_{k−1} g_{k−1}·d_{k−1} / g_k·d_k (N–W 3.60). Trials with non-finite J (degenerate
-//! triangles) count as an increase. Of the phase iterates, the one with the lowest G is
+//! follow α_{k−1} g_{k−1}·d_{k−1} / g_k·d_k (N–W 3.60). Trials that make a triangle
+//! degenerate, or J not finite, count as an increase. Of the phase iterates, the one with the lowest G is
 //! returned (the last one, unless a phase made G worse): G is what the penalty drives down;
 //! g_max may rise while G falls (on the hemisphere fixture it does for the whole run).
 
@@ -80,6 +80,9 @@ pub(super) fn run(
             run.positions.copy_from_slice(&pos);
         }
         if gm <= tol {
+            run.g_max = gm;
+            run.best_iteration = k;
+            run.positions.copy_from_slice(&pos);
             run.stop = Stop::Tolerance;
             return Ok(run);
         }
@@ -175,6 +178,10 @@ fn phase(
                     t[k] = p[k] + alpha * d[k];
                 }
             }
+            if degenerate(model.mesh(), &ws.trial) {
+                last_alpha = alpha;
+                return (f64::INFINITY, 0.0);
+            }
             let v = model.j_gradient(&ws.trial, rho, &mut ws.g, &mut ws.tmp, &mut ws.trial_grad);
             mask(&mut ws.trial_grad, movable);
             last_alpha = alpha;
@@ -221,6 +228,15 @@ fn phase(
         prev_alpha = alpha;
     }
     out
+}
+
+/// Whether a triangle is degenerate at `pos` (θ stays finite there, so J alone would not
+/// refuse it, but the output could not be a valid mesh).
+fn degenerate(mesh: &crate::mesh::Mesh, pos: &[[f64; 3]]) -> bool {
+    mesh.triangles().iter().any(|t| {
+        let [a, b, c] = t.map(|v| pos[v as usize]);
+        crate::mesh::is_degenerate_triangle(a, b, c)
+    })
 }
 
 fn mask(v: &mut [[f64; 3]], movable: &[bool]) {

@@ -22,7 +22,9 @@
 //! it again until N_max. The run stops when the heap's top is at most ε and the global
 //! max |g| is too (`tolerance`), when only stalled vertices are above ε (`stalled`, naming
 //! them), or after `max_moves` pops. Seam and boundary vertices never move (Sec. 5.2); every
-//! output vertex is q⁰ + δ n_q with |δ| ≤ δ_T.
+//! output vertex is q⁰ + δ n_q with |δ| ≤ δ_T; a move that would make a triangle of the fan
+//! degenerate is refused (halved, like one that does not lower T). If the moves together made
+//! g_max worse (the paper's Newton update does on real garments), the input is returned.
 
 use super::energy::{g_max, Model};
 use super::{Params, Run, Stop, Update};
@@ -143,9 +145,24 @@ pub(super) fn run(
         run.best_iteration = pops;
     } else {
         run.g_max = run.g_max_input;
-        run.stop_detail = "every move together made g_max worse; the input is returned".into();
+        run.stalled.clear();
+        run.stop_detail = format!(
+            "{} after {pops} pops, but the moves together made g_max worse ({:.2e} > {:.2e}); \
+             the input is returned",
+            run.stop.as_str(),
+            g_max(&g),
+            run.g_max_input
+        );
     }
     Ok(run)
+}
+
+/// Whether a triangle of q's fan is degenerate at `pos`.
+fn fan_degenerate(mesh: &Mesh, pos: &[[f64; 3]], q: u32) -> bool {
+    mesh.conn().fan_of(q).iter().any(|&h| {
+        let [a, b, c] = mesh.triangles()[h as usize / 3].map(|v| pos[v as usize]);
+        crate::mesh::is_degenerate_triangle(a, b, c)
+    })
 }
 
 fn finish(g: &[f64], eps: f64) -> Stop {
@@ -188,6 +205,10 @@ fn step(
     for _ in 0..=HALVINGS {
         let d = *delta + change;
         pos[qi] = [0, 1, 2].map(|k| q0[k] + d * n[k]);
+        if fan_degenerate(model.mesh(), pos, q) {
+            change *= 0.5;
+            continue;
+        }
         let t1 = s.evaluate(model, pos);
         // Armijo on T: a move must buy a decrease in proportion to its predicted one, else
         // ever smaller moves keep a vertex popping without getting anywhere.

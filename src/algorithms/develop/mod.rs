@@ -14,8 +14,9 @@
 //! The mesh is welded: a seam vertex is one position, so G0 continuity across seams is exact
 //! (Sec. 4.2's linked vertex sets are implicit), and it is not interior, so g = 0 there
 //! (Eq. 5). `global` moves every vertex unless `fix_boundary` (then boundary and seam vertices
-//! stay bit-identical); `local` never moves them (Sec. 5.2). An input already within the
-//! tolerance comes back unchanged after 0 iterations. Choices where the papers are vague
+//! stay bit-identical); `local` never moves them (Sec. 5.2). With `global` and `local`, an
+//! input already within the tolerance comes back unchanged after 0 iterations (`loop`: its
+//! subdivided mesh M_L does). Choices where the papers are vague
 //! follow ../shared/notes/paper-notes.md parts B and C (stop on |g| not g², analytic
 //! gradients, the CG sign, ρ per phase, D at named tolerances).
 
@@ -350,7 +351,7 @@ pub struct Summary {
     pub stop_detail: String,
     /// Outer iterations (`penalty_cg`), Newton iterations (`sqp`) or heap pops (`local`).
     pub iterations: usize,
-    /// CG steps (`penalty_cg`), moves tried (`local`); 0 for `sqp`.
+    /// CG steps (`penalty_cg`), heap pops (`local`, as `iterations`); 0 for `sqp`.
     pub inner_steps: usize,
     /// The iteration whose positions are returned (0: the start).
     pub best_iteration: usize,
@@ -366,7 +367,8 @@ pub struct Summary {
     pub big_g_after: f64,
     /// E (Eq. 7) of the output against the rest lengths (the start's: 0 before).
     pub e_after: f64,
-    /// D[M] before and after at each of `d_tolerance`.
+    /// D[M] before (the input; for `loop` M₀) and after at each of `d_tolerance`; every
+    /// interior vertex counts, also those `impossible_vertices` leaves out of g.
     pub d: Vec<DAt>,
     /// δS = Σ|l − l⁰| / Σ l⁰ against the rest lengths.
     pub delta_s: f64,

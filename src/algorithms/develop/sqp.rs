@@ -91,12 +91,18 @@ pub(super) fn run(
     let mut best_f = f64::INFINITY;
     let mut since_halving = 0;
     let mut stall_ref = run.g_max;
+    run.stop = Stop::MaxIterations;
     for it in 1..=params.max_iterations {
         if control.cancelled() {
             return Err(AlgoError::Cancelled);
         }
         model.e_gradient(&pos, &mut grad_e);
-        kkt.fill(model, &pos, mu + damping)?;
+        if let Err(e) = kkt.fill(model, &pos, mu + damping) {
+            // A failed factorisation ends the run with the best iterate, not the job.
+            run.stop = Stop::LineSearch;
+            run.stop_detail = format!("{e}; the best iterate is returned");
+            break;
+        }
         let rhs = &mut kkt.rhs;
         rhs.fill(0.0);
         for (s, &v) in kkt.verts.iter().enumerate() {
@@ -110,7 +116,11 @@ pub(super) fn run(
         }
         let slope_f: f64;
         {
-            kkt.solve()?;
+            if let Err(e) = kkt.solve() {
+                run.stop = Stop::LineSearch;
+                run.stop_detail = format!("{e}; the best iterate is returned");
+                break;
+            }
             let (step, y) = kkt.rhs.split_at(3 * kkt.m);
             slope_f = kkt
                 .verts
@@ -149,9 +159,11 @@ pub(super) fn run(
                 }
                 if halving == 0 {
                     // Second-order correction: same factor, right-hand side [0; 2π − θ(trial)].
-                    kkt.correct(&trial_g)?;
+                    let corrected = kkt.correct(&trial_g).is_ok();
                     kkt.place_corrected(&pos, h, &mut trial);
-                    if let Some(ft) = evaluate(model, &trial, &mut trial_g, &f_of) {
+                    if !corrected {
+                        // No correction: go on halving the plain step.
+                    } else if let Some(ft) = evaluate(model, &trial, &mut trial_g, &f_of) {
                         if ft + nu * l1(&trial_g) <= phi0 + ARMIJO * slope {
                             accepted = Some((1.0, ft));
                             break;
@@ -225,7 +237,6 @@ pub(super) fn run(
                 break;
             }
         }
-        run.stop = Stop::MaxIterations;
     }
     if run.g_max <= tol && run.stop != Stop::Tolerance {
         // Flattenable but not yet stationary: still a usable answer; say so.

@@ -1,0 +1,86 @@
+//! `develop` at the size of Wang and Tang's examples II and III (3,047 and 3,016 vertices; the
+//! paper: global 310–390 s, local 1–23 s on a PIII 900): ../shared/meshes'
+//! garment/diffavatar_tshirt.obj (2,799 vertices), and the same garment after two levels of
+//! Loop subdivision (≈ 44k vertices) to show how the cost grows. Targets: global < 2 s (either
+//! solver) and local < 0.1 s at 3k.
+//!
+//! Before timing, one checked run per method prints its iterations, g_max in and out (measured
+//! by `geometry`), δS, the stop reason and the run's peak heap.
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use flatmesh::algorithms::develop::{self, loop_subdivide, Method, Params, Solver};
+use flatmesh::algorithms::Silent;
+use flatmesh::corpus;
+use flatmesh::mesh::Mesh;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+#[path = "common/peak_alloc.rs"]
+mod peak_alloc;
+use peak_alloc::{LIVE, PEAK};
+
+fn methods() -> Vec<(&'static str, Params)> {
+    let p = |method, solver| Params {
+        method,
+        solver,
+        ..Params::default()
+    };
+    vec![
+        ("global_sqp", p(Method::Global, Solver::Sqp)),
+        ("global_penalty_cg", p(Method::Global, Solver::PenaltyCg)),
+        ("local", p(Method::Local, Solver::Sqp)),
+    ]
+}
+
+fn bench(c: &mut Criterion) {
+    let path = std::path::Path::new(corpus::SHARED_MESHES).join("garment/diffavatar_tshirt.obj");
+    let Ok(bytes) = std::fs::read(&path) else {
+        println!("SKIPPED: {} is absent", path.display());
+        return;
+    };
+    let tshirt = flatmesh::io::load(&bytes, flatmesh::io::Format::Obj)
+        .unwrap()
+        .0;
+    let mut big = tshirt.clone();
+    for _ in 0..2 {
+        big = Mesh::new(loop_subdivide(&big)).unwrap().0;
+    }
+    let mut group = c.benchmark_group("develop");
+    group
+        .sample_size(10)
+        .measurement_time(Duration::from_secs(20));
+    for (label, mesh) in [("tshirt2.8k", &tshirt), ("tshirt_loop2", &big)] {
+        println!(
+            "{label}: {} V / {} F",
+            mesh.num_vertices(),
+            mesh.num_faces()
+        );
+        for (name, params) in methods() {
+            let base = LIVE.load(Ordering::Relaxed);
+            PEAK.store(base, Ordering::Relaxed);
+            let t = std::time::Instant::now();
+            let o = develop::run(mesh, &params, &Silent::default()).unwrap();
+            let seconds = t.elapsed().as_secs_f64();
+            let peak = PEAK.load(Ordering::Relaxed) - base;
+            let out = o.mesh.unwrap();
+            println!(
+                "  {name}: {} iterations ({} inner), g_max {:.3e} -> {:.3e} ({}), δS {:.2e}, \
+                 {seconds:.2} s, peak heap {:.1} MB",
+                o.summary.iterations,
+                o.summary.inner_steps,
+                corpus::max_flattenability(mesh),
+                corpus::max_flattenability(&out),
+                o.summary.stop_detail,
+                o.summary.delta_s,
+                peak as f64 / 1e6
+            );
+            group.bench_function(format!("{label}/{name}"), |b| {
+                b.iter(|| develop::run(mesh, &params, &Silent::default()).unwrap())
+            });
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);
