@@ -66,6 +66,7 @@ pub(super) fn run(
             rho: Some(rho),
             cg_steps: Some(steps.taken),
             step_length: None,
+            damping: None,
         });
         control.progress(&Progress {
             stage: "penalty_cg".into(),

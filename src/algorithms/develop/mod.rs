@@ -258,9 +258,12 @@ pub struct HistoryEntry {
     /// `penalty_cg`: CG steps taken in the phase.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub cg_steps: Option<usize>,
-    /// `sqp`: step length taken.
+    /// `sqp`: 1 when the step was taken, 0 when the damping was raised instead.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub step_length: Option<f64>,
+    /// `sqp`: the Levenberg–Marquardt damping λ of the (2,2) block for the next iteration.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub damping: Option<f64>,
 }
 
 /// What a method reached, before the figures are measured.
