@@ -91,6 +91,9 @@ pub struct Params {
     pub cg_steps: usize,
     /// `sqp`: weight μ of Σ|v − v⁰|² beside E (both over h̄²).
     pub closeness: f64,
+    /// `sqp`: weight κ of the displacement's Dirichlet energy Σ_e |d_a − d_b|² beside E (over
+    /// h̄²): smoother steps, more stretch.
+    pub smoothness: f64,
     /// `sqp`: once flattenable, stop when a step moves no vertex more than this many mean
     /// edge lengths.
     pub step_tolerance: f64,
@@ -121,6 +124,7 @@ impl Default for Params {
             eta: 1e-4,
             cg_steps: 5,
             closeness: 1e-2,
+            smoothness: 0.0,
             step_tolerance: 1e-4,
             stall_iterations: 40,
             delta_t: None,
@@ -168,6 +172,9 @@ impl Params {
                 "closeness",
                 "must be finite and > 0 (it makes the problem well posed)",
             ));
+        }
+        if !(self.smoothness >= 0.0 && self.smoothness.is_finite()) {
+            return Err(bad("smoothness", "must be finite and ≥ 0"));
         }
         if !(self.step_tolerance > 0.0 && self.step_tolerance < 1.0) {
             return Err(bad("step_tolerance", "must be in (0, 1)"));

@@ -3,9 +3,15 @@
 //! instead of a penalty, so that the answer is exactly flattenable (g_max ≤ 1e-6) where the
 //! paper's penalty runs all stall near 1e-3 (its Table 1).
 //!
-//! Objective f = (E + μ Σ_v |v − v⁰|²) / h̄², μ = `closeness` (default 1e-2): E alone is blind
-//! to rigid motions and to every isometric bending, so its Hessian is singular; the small pull
-//! to the input picks, among the minimum-deformation answers, the one nearest the input. Each
+//! Objective f = (E + μ Σ_v |v − v⁰|² + κ Σ_e |d_a − d_b|²) / h̄², d = v − v⁰, μ =
+//! `closeness` (default 1e-2), κ = `smoothness` (default 0): E alone is blind to rigid motions
+//! and to every isometric bending, so its Hessian is singular; the small pull to the input
+//! picks, among the minimum-deformation answers, the one nearest the input. κ > 0 (the
+//! Dirichlet energy of the displacement, on the same edge pattern) makes the steps smooth
+//! instead of crinkled, which keeps θ's linearisation good and helps the solver to a
+//! flattenable mesh at the price of more stretch: measured with κ = 1 (0.1), the t-shirt
+//! reaches g_max 4.0e-4 (6.3e-3) with δS 8.9 % (4.8 %), gf_dress converges (1.9e-3) with δS
+//! 3.5 % (1.9 %), against 2.0e-2 / 2.9 % and 4.6e-3 / 0.9 % with κ = 0. Each
 //! iteration solves the KKT system
 //!
 //! ```text
@@ -91,6 +97,7 @@ pub(super) fn run(
         ));
     }
     let mu = params.closeness;
+    let kappa = params.smoothness;
     let f_of = |pos: &[[f64; 3]]| {
         let c: f64 = pos
             .iter()
@@ -100,7 +107,18 @@ pub(super) fn run(
                 dot(d, d)
             })
             .sum();
-        (model.e(pos) + mu * c) / (h * h)
+        let k: f64 = model
+            .mesh()
+            .conn()
+            .edges()
+            .iter()
+            .map(|e| {
+                let (a, b) = (e[0] as usize, e[1] as usize);
+                let d = [0, 1, 2].map(|i| (pos[a][i] - v0[a][i]) - (pos[b][i] - v0[b][i]));
+                dot(d, d)
+            })
+            .sum();
+        (model.e(pos) + mu * c + kappa * k) / (h * h)
     };
     let sq = |g: &[f64]| cons.iter().map(|&v| g[v as usize].powi(2)).sum::<f64>();
     let mut pos = v0.to_vec();
@@ -124,6 +142,16 @@ pub(super) fn run(
         }
         run.iterations = it;
         model.e_gradient(&pos, &mut grad_e);
+        if kappa > 0.0 {
+            for e in model.mesh().conn().edges() {
+                let (a, b) = (e[0] as usize, e[1] as usize);
+                for i in 0..3 {
+                    let d = (pos[a][i] - v0[a][i]) - (pos[b][i] - v0[b][i]);
+                    grad_e[a][i] += 2.0 * kappa * d;
+                    grad_e[b][i] -= 2.0 * kappa * d;
+                }
+            }
+        }
         // Two right-hand sides on one factorisation: normal [0; 2π − θ], tangential [−∇f; 0].
         kkt.rhs.fill(0.0);
         for (c, &v) in cons.iter().enumerate() {
@@ -136,7 +164,7 @@ pub(super) fn run(
             }
         }
         if let Err(e) = kkt
-            .fill(model, &pos, mu, damping)
+            .fill(model, &pos, mu, kappa, damping)
             .and_then(|()| kkt.solve_two())
         {
             // A failed factorisation ends the run with the best iterate, not the job.
@@ -426,6 +454,7 @@ impl Kkt {
         model: &Model<'_>,
         pos: &[[f64; 3]],
         mu: f64,
+        kappa: f64,
         damping: f64,
     ) -> Result<(), AlgoError> {
         let mesh = model.mesh();
@@ -454,6 +483,9 @@ impl Kkt {
                 for i in 0..3 {
                     for j in 0..=i {
                         self.values[at + idx] += 2.0 * u[i] * u[j];
+                        if i == j {
+                            self.values[at + idx] += 2.0 * kappa;
+                        }
                         idx += 1;
                     }
                 }
@@ -464,6 +496,7 @@ impl Kkt {
                     for j in 0..3 {
                         self.values[at + 3 * i + j] = -2.0 * u[i] * u[j];
                     }
+                    self.values[at + 4 * i] -= 2.0 * kappa;
                 }
             }
         }
