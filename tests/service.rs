@@ -379,14 +379,7 @@ async fn report_job_end_to_end() {
     let done = wait_for(&c, &s, id, &["succeeded", "failed"]).await;
     assert_eq!(done["status"], "succeeded", "{done}");
     assert!(done["expires_at"].is_string() && done["finished_at"].is_string());
-    let result = json_of(
-        c.get(s.url(&format!("/v1/jobs/{id}/result")))
-            .send()
-            .await
-            .unwrap(),
-        "Report",
-    )
-    .await;
+    let result = job_result(&c, &s, id).await;
     let rep = flatmesh::report::Report::compute(&mesh, &w);
     assert_eq!(
         result["max_flattenability"].as_f64().unwrap(),
@@ -548,14 +541,7 @@ async fn fl_mesh_job_end_to_end() {
     let done = wait_for(&c, &s, id, &["succeeded", "failed"]).await;
     assert_eq!(done["status"], "succeeded", "{done}");
     assert!(done["links"]["patterns"].is_string(), "{done}");
-    let result = json_of(
-        c.get(s.url(&format!("/v1/jobs/{id}/result")))
-            .send()
-            .await
-            .unwrap(),
-        "Report",
-    )
-    .await;
+    let result = job_result(&c, &s, id).await;
     assert_eq!(result["job"]["converged"], true, "{result}");
     assert_eq!(result["job"]["kind"], "fl-mesh", "{result}");
     assert!(result["job"]["iterations"].as_u64().unwrap() >= 1);
@@ -689,14 +675,7 @@ async fn perturb_job_end_to_end() {
     let id = j["id"].as_str().unwrap();
     let done = wait_for(&c, &s, id, &["succeeded", "failed"]).await;
     assert_eq!(done["status"], "succeeded", "{done}");
-    let result = json_of(
-        c.get(s.url(&format!("/v1/jobs/{id}/result")))
-            .send()
-            .await
-            .unwrap(),
-        "Report",
-    )
-    .await;
+    let result = job_result(&c, &s, id).await;
     let fig = &result["job"];
     assert_eq!(fig["kind"], "perturb");
     assert!(fig["body"]["clearance_after"].is_array(), "{fig}");
@@ -778,14 +757,7 @@ async fn develop_job_end_to_end() {
     let done = wait_for(&c, &s, id, &["succeeded", "failed"]).await;
     assert_eq!(done["status"], "succeeded", "{done}");
     assert_eq!(done["converged"], true, "{done}");
-    let result = json_of(
-        c.get(s.url(&format!("/v1/jobs/{id}/result")))
-            .send()
-            .await
-            .unwrap(),
-        "Report",
-    )
-    .await;
+    let result = job_result(&c, &s, id).await;
     let fig = &result["job"];
     assert_eq!(fig["kind"], "develop");
     let rows = fig["table"]["rows"].as_array().unwrap();
@@ -840,14 +812,7 @@ async fn subdivide_job_end_to_end() {
     let id = j["id"].as_str().unwrap();
     let done = wait_for(&c, &s, id, &["succeeded", "failed"]).await;
     assert_eq!(done["status"], "succeeded", "{done}");
-    let result = json_of(
-        c.get(s.url(&format!("/v1/jobs/{id}/result")))
-            .send()
-            .await
-            .unwrap(),
-        "Report",
-    )
-    .await;
+    let result = job_result(&c, &s, id).await;
     assert_eq!(
         result["job"]["levels"].as_array().unwrap().len(),
         1,

@@ -72,6 +72,14 @@ pub enum AlgoError {
     Input(String),
 }
 
+/// An [`AlgoError::InvalidParam`] naming `key` (parameter range checks).
+pub(crate) fn bad_param(key: &str, message: &str) -> AlgoError {
+    AlgoError::InvalidParam {
+        key: key.into(),
+        message: message.into(),
+    }
+}
+
 /// What a run produced: an output mesh (for optimisers), flat patterns (for flattening), and
 /// the algorithm's own figures `S`, a typed struct of each algorithm (`fl_mesh::Summary`, …).
 #[derive(Debug, Clone, Default)]

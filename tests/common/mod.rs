@@ -202,6 +202,18 @@ pub async fn submit(c: &reqwest::Client, s: &Server, body: Value) -> Value {
     json_of(r, "Job").await
 }
 
+/// GET a succeeded job's result (report.json), checked against the `Report` schema.
+pub async fn job_result(c: &reqwest::Client, s: &Server, id: &str) -> Value {
+    json_of(
+        c.get(s.url(&format!("/v1/jobs/{id}/result")))
+            .send()
+            .await
+            .unwrap(),
+        "Report",
+    )
+    .await
+}
+
 /// GET `path` and its body, whatever the status.
 pub async fn download(c: &reqwest::Client, s: &Server, path: &str) -> Vec<u8> {
     c.get(s.url(path))

@@ -29,6 +29,7 @@ mod sqp;
 pub use local::{t_and_slope, vertex_normals_unweighted};
 pub use loop_subdivision::loop_subdivide;
 
+use super::bad_param as bad;
 use super::{AlgoError, Control, Distance, Outcome};
 use crate::mesh::Mesh;
 use energy::{big_g, g_max, Model};
@@ -134,13 +135,6 @@ impl Default for Params {
             levels: 1,
             d_tolerance: vec![1e-6, 1e-4, 1e-3, 1e-2],
         }
-    }
-}
-
-fn bad(key: &str, message: &str) -> AlgoError {
-    AlgoError::InvalidParam {
-        key: key.into(),
-        message: message.into(),
     }
 }
 

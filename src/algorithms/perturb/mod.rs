@@ -75,6 +75,7 @@ mod local;
 pub use body::{Body, Clearance};
 pub use local::min_norm_step;
 
+use super::bad_param as bad;
 use super::{AlgoError, Control, Distance, Outcome};
 use crate::mesh::Mesh;
 use serde::{Deserialize, Serialize};
@@ -144,13 +145,6 @@ impl Default for Params {
             fairing: 0.0,
             shape_penalty: 1.0,
         }
-    }
-}
-
-fn bad(key: &str, message: &str) -> AlgoError {
-    AlgoError::InvalidParam {
-        key: key.into(),
-        message: message.into(),
     }
 }
 
