@@ -618,3 +618,35 @@ fn loop_method_reports_the_table_and_every_level() {
         table.delta_s
     );
 }
+
+#[test]
+fn sqp_makes_the_diffavatar_tshirt_flattenable_and_reports_its_stretch() {
+    let rel = "garment/diffavatar_tshirt.obj";
+    let Some(path) = flatmesh::corpus::shared_mesh_for_tests(rel) else {
+        return;
+    };
+    let bytes = std::fs::read(&path).unwrap();
+    let mesh = flatmesh::io::load(&bytes, flatmesh::io::Format::Obj)
+        .unwrap()
+        .0;
+    let out = develop::run(&mesh, &Params::default(), &Silent::default()).unwrap();
+    let m = out.mesh.unwrap();
+    // Independent: angle sums with acos, lengths recomputed.
+    let g = g_independent(&m, m.positions());
+    let gmax = g.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+    assert!(
+        gmax <= 1e-6,
+        "{rel}: g_max {gmax} ({})",
+        out.summary.stop_detail
+    );
+    assert!(out.summary.converged);
+    let l0 = develop::energy::edge_lengths(&mesh, mesh.positions());
+    let l1 = develop::energy::edge_lengths(&m, m.positions());
+    let ds = l0.iter().zip(&l1).map(|(a, b)| (a - b).abs()).sum::<f64>() / l0.iter().sum::<f64>();
+    assert!(
+        (ds - out.summary.delta_s).abs() <= 1e-12,
+        "{ds} vs {}",
+        out.summary.delta_s
+    );
+    assert!(ds > 0.0 && ds < 0.2, "δS {ds}");
+}

@@ -92,8 +92,9 @@ pub struct Params {
     pub cg_steps: usize,
     /// `sqp`: weight μ of Σ|v − v⁰|² beside E (both over h̄²).
     pub closeness: f64,
-    /// `sqp`: weight κ of the displacement's Dirichlet energy Σ_e |d_a − d_b|² beside E (over
-    /// h̄²): smoother steps, more stretch.
+    /// `sqp`: starting weight κ of the displacement's Dirichlet energy Σ_e |d_a − d_b|²
+    /// beside E (over h̄²), lowered to 0 by continuation once flattenable; 0: least stretch
+    /// throughout.
     pub smoothness: f64,
     /// `sqp`: once flattenable, stop when a step moves no vertex more than this many mean
     /// edge lengths.
@@ -125,7 +126,7 @@ impl Default for Params {
             eta: 1e-4,
             cg_steps: 5,
             closeness: 1e-2,
-            smoothness: 0.0,
+            smoothness: 10.0,
             step_tolerance: 1e-4,
             stall_iterations: 40,
             delta_t: None,
