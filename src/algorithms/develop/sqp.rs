@@ -14,7 +14,7 @@
 //! change and makes θ's linearisation poor, and a garment's total angle defect must be
 //! carried to its boundary (Gauss–Bonnet), which damped least-stretch steps do like a slow
 //! diffusion; smooth steps carry it. Measured on the 22 open shared meshes (issue 16 note):
-//! converged 6 with κ = 0 (the t-shirt stalls at 2.0e-2, δS 2.9 %), 10 with κ⁰ = 10 (the
+//! converged 5 with κ = 0 (the t-shirt stalls at 2.0e-2, δS 2.9 %), 9 with κ⁰ = 10 (the
 //! t-shirt 9.4e-7 with δS 9.9 %, gf_dress, pf_try3, bff_hemisphere newly), at the price of
 //! more stretch where the continuation runs out of iterations. `smoothness = 0` is the
 //! least-stretch model throughout. Each
