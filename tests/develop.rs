@@ -650,3 +650,23 @@ fn sqp_makes_the_diffavatar_tshirt_flattenable_and_reports_its_stretch() {
     );
     assert!(ds > 0.0 && ds < 0.2, "δS {ds}");
 }
+
+#[test]
+fn loop_levels_that_would_make_too_many_faces_are_refused_before_any_work() {
+    let mesh = two_patch_grid(50, 0.1, 2, |x, y| x * y);
+    let p = Params {
+        levels: 4,
+        ..params(Method::Loop, Solver::Sqp)
+    };
+    assert!(mesh.num_faces() * 256 > develop::MAX_LOOP_FACES);
+    match develop::run(&mesh, &p, &Silent::default()) {
+        Err(flatmesh::algorithms::AlgoError::InvalidParam { key, message }) => {
+            assert_eq!(key, "levels");
+            assert!(message.contains("faces"), "{message}");
+        }
+        other => panic!(
+            "expected a refusal, got {:?}",
+            other.map(|o| o.summary.iterations)
+        ),
+    }
+}

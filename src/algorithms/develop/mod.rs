@@ -422,6 +422,10 @@ pub fn developability(mesh: &Mesh, tolerance: f64) -> f64 {
     crate::geometry::developability_d(&varpi, &area, tolerance)
 }
 
+/// Most faces a `loop` run may subdivide to (memory: the solver's factor grows faster than
+/// the faces; 1M faces is about 500k vertices).
+pub const MAX_LOOP_FACES: usize = 1_000_000;
+
 /// Run `develop`.
 pub fn run(
     mesh: &Mesh,
@@ -432,6 +436,18 @@ pub fn run(
     let mut levels = Vec::new();
     let start = match params.method {
         Method::Loop => {
+            let faces = mesh.num_faces().saturating_mul(1 << (2 * params.levels));
+            if faces > MAX_LOOP_FACES {
+                return Err(bad(
+                    "levels",
+                    &format!(
+                        "{} levels of Loop subdivision would make {faces} faces from {}; at \
+                         most {MAX_LOOP_FACES} are allowed (fewer levels, or a coarser mesh)",
+                        params.levels,
+                        mesh.num_faces()
+                    ),
+                ));
+            }
             let mut m = mesh.clone();
             for _ in 0..params.levels {
                 if control.cancelled() {
