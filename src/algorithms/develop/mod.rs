@@ -260,7 +260,7 @@ pub struct HistoryEntry {
     /// `penalty_cg`: CG steps taken in the phase.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub cg_steps: Option<usize>,
-    /// `sqp`: 1 when the step was taken, 0 when the damping was raised instead.
+    /// `sqp`: the objective step's weight w when the step was taken, 0 when it was refused.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub step_length: Option<f64>,
     /// `sqp`: the Levenberg–Marquardt damping λ of the (2,2) block for the next iteration.
@@ -356,7 +356,8 @@ pub struct Summary {
     pub stop_detail: String,
     /// Outer iterations (`penalty_cg`), Newton iterations (`sqp`) or heap pops (`local`).
     pub iterations: usize,
-    /// CG steps (`penalty_cg`), heap pops (`local`, as `iterations`); 0 for `sqp`.
+    /// CG steps (`penalty_cg`), heap pops (`local`, as `iterations`), corrections taken
+    /// (`sqp`).
     pub inner_steps: usize,
     /// The iteration whose positions are returned (0: the start).
     pub best_iteration: usize,
