@@ -670,3 +670,119 @@ fn loop_levels_that_would_make_too_many_faces_are_refused_before_any_work() {
         ),
     }
 }
+
+#[test]
+fn penalty_cg_stop_reasons_eta_and_max_iterations_are_honest() {
+    let mesh = two_patch_grid(8, 0.2, 9, |x, y| 0.4 * (x * x + y * y));
+    let few = Params {
+        max_iterations: 2,
+        eta: 1e-12,
+        ..params(Method::Global, Solver::PenaltyCg)
+    };
+    let out = develop::run(&mesh, &few, &Silent::default()).unwrap();
+    assert_eq!(out.summary.stop_reason, Stop::MaxIterations);
+    assert_eq!(out.summary.iterations, 2);
+    assert!(!out.summary.converged);
+    let loose = Params {
+        eta: 0.5,
+        ..params(Method::Global, Solver::PenaltyCg)
+    };
+    let out = develop::run(&mesh, &loose, &Silent::default()).unwrap();
+    assert_eq!(out.summary.stop_reason, Stop::Eta);
+    // The stop is by η: the last two phases' G differ by less than η G⁰.
+    let h = &out.summary.history;
+    let g0 = out.summary.big_g_before;
+    let last = h.len() - 1;
+    let prev = if last == 0 { g0 } else { h[last - 1].big_g };
+    assert!((h[last].big_g - prev).abs() < 0.5 * g0);
+}
+
+#[test]
+fn sqp_stops_by_max_iterations_with_its_best_iterate() {
+    let mesh = load("cone_noisy");
+    let p = Params {
+        max_iterations: 2,
+        ..Params::default()
+    };
+    let out = develop::run(&mesh, &p, &Silent::default()).unwrap();
+    assert_eq!(out.summary.stop_reason, Stop::MaxIterations);
+    assert!(!out.summary.converged);
+    let m = out.mesh.unwrap();
+    let g = g_independent(&m, m.positions());
+    let gmax = g.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+    let g0 = g_independent(&mesh, mesh.positions());
+    let g0max = g0.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+    assert!(gmax < g0max, "{g0max} -> {gmax}");
+    assert!((gmax - out.summary.g_max_after).abs() < 1e-12);
+}
+
+/// A closed octahedron (χ = 2): Gauss–Bonnet makes 2π at every vertex impossible, so its
+/// vertices are left out of g, counted, and nothing moves.
+#[test]
+fn a_closed_sphere_like_mesh_is_reported_impossible_not_crashed_on() {
+    let positions = vec![
+        [1.0, 0.0, 0.0],
+        [-1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [0.0, -1.0, 0.0],
+        [0.0, 0.0, 1.0],
+        [0.0, 0.0, -1.0],
+    ];
+    let triangles = vec![
+        [0, 2, 4],
+        [2, 1, 4],
+        [1, 3, 4],
+        [3, 0, 4],
+        [2, 0, 5],
+        [1, 2, 5],
+        [3, 1, 5],
+        [0, 3, 5],
+    ];
+    let mesh = Mesh::new(RawMesh {
+        face_patch: vec![0; 8],
+        positions,
+        triangles,
+        patch_names: vec!["o".into()],
+        uv: None,
+    })
+    .unwrap()
+    .0;
+    for p in all_methods() {
+        let out = develop::run(&mesh, &p, &Silent::default()).unwrap();
+        assert_eq!(out.summary.impossible_vertices, 6);
+        assert_eq!(out.summary.iterations, 0);
+        assert_eq!(out.mesh.unwrap().positions(), mesh.positions());
+    }
+}
+
+#[test]
+fn unreferenced_vertices_stay_where_they_are() {
+    let grid = two_patch_grid(6, 0.2, 13, |x, y| 0.3 * x * x + 0.2 * y * y);
+    let mut raw = grid.to_raw();
+    let stray = [7.0, 8.0, 9.0];
+    raw.positions.push(stray);
+    let (mesh, _) = Mesh::new(raw).unwrap();
+    let v = mesh.num_vertices() - 1;
+    for p in all_methods() {
+        let out = develop::run(&mesh, &p, &Silent::default()).unwrap();
+        let m = out.mesh.unwrap();
+        assert_eq!(m.positions()[v], stray, "{:?}", p.method);
+        assert!(out.summary.iterations > 0);
+    }
+}
+
+#[test]
+fn loop_with_the_papers_penalty_solver_reports_its_table() {
+    let mesh = two_patch_grid(4, 0.2, 21, |x, y| 0.3 * (x * x + y * y));
+    let p = params(Method::Loop, Solver::PenaltyCg);
+    let out = develop::run(&mesh, &p, &Silent::default()).unwrap();
+    let t = out.summary.table.as_ref().unwrap();
+    assert_eq!(out.summary.solver, Some(Solver::PenaltyCg));
+    assert!(
+        t.big_g[2] < t.big_g[1],
+        "G[M_R] {} < G[M_L] {}",
+        t.big_g[2],
+        t.big_g[1]
+    );
+    assert_eq!(t.vertices[1], out.levels[0].num_vertices());
+}
