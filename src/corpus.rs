@@ -208,6 +208,30 @@ pub fn fl_meshed_cached(name: &str, mesh: &Mesh, dir: &Path) -> Option<(Mesh, bo
     Some((m, conv))
 }
 
+/// The regular octahedron (closed, χ = 2, every vertex's defect 2π − 4π/3): the smallest
+/// mesh Gauss–Bonnet forbids to be flattenable (tests).
+pub fn octahedron() -> Mesh {
+    let positions = vec![
+        [1.0, 0.0, 0.0],
+        [-1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [0.0, -1.0, 0.0],
+        [0.0, 0.0, 1.0],
+        [0.0, 0.0, -1.0],
+    ];
+    let triangles = vec![
+        [0, 2, 4],
+        [2, 1, 4],
+        [1, 3, 4],
+        [3, 0, 4],
+        [2, 0, 5],
+        [1, 2, 5],
+        [3, 1, 5],
+        [0, 3, 5],
+    ];
+    procedural_mesh(positions, triangles)
+}
+
 /// `perturb`'s procedural pair, a garment and the body it is worn on (tests and benchmarks).
 /// A closed capsule-like body: a cylinder of radius `r` along z over [0, len], capped by fans.
 pub fn arm(r: f64, len: f64, around: usize, along: usize) -> Mesh {

@@ -720,33 +720,7 @@ fn sqp_stops_by_max_iterations_with_its_best_iterate() {
 /// vertices are left out of g, counted, and nothing moves.
 #[test]
 fn a_closed_sphere_like_mesh_is_reported_impossible_not_crashed_on() {
-    let positions = vec![
-        [1.0, 0.0, 0.0],
-        [-1.0, 0.0, 0.0],
-        [0.0, 1.0, 0.0],
-        [0.0, -1.0, 0.0],
-        [0.0, 0.0, 1.0],
-        [0.0, 0.0, -1.0],
-    ];
-    let triangles = vec![
-        [0, 2, 4],
-        [2, 1, 4],
-        [1, 3, 4],
-        [3, 0, 4],
-        [2, 0, 5],
-        [1, 2, 5],
-        [3, 1, 5],
-        [0, 3, 5],
-    ];
-    let mesh = Mesh::new(RawMesh {
-        face_patch: vec![0; 8],
-        positions,
-        triangles,
-        patch_names: vec!["o".into()],
-        uv: None,
-    })
-    .unwrap()
-    .0;
+    let mesh = flatmesh::corpus::octahedron();
     for p in all_methods() {
         let out = develop::run(&mesh, &p, &Silent::default()).unwrap();
         assert_eq!(out.summary.impossible_vertices, 6);

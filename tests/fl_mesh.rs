@@ -237,30 +237,7 @@ fn planar_input_moves_only_by_the_fairing() {
 /// converged = false, every vertex named as stuck, nothing NaN, the run ends.
 #[test]
 fn closed_surface_ends_unconverged_with_stuck_vertices() {
-    let raw = RawMesh {
-        positions: vec![
-            [1.0, 0.0, 0.0],
-            [-1.0, 0.0, 0.0],
-            [0.0, 1.0, 0.0],
-            [0.0, -1.0, 0.0],
-            [0.0, 0.0, 1.0],
-            [0.0, 0.0, -1.0],
-        ],
-        triangles: vec![
-            [0, 2, 4],
-            [2, 1, 4],
-            [1, 3, 4],
-            [3, 0, 4],
-            [2, 0, 5],
-            [1, 2, 5],
-            [3, 1, 5],
-            [0, 3, 5],
-        ],
-        face_patch: vec![0; 8],
-        patch_names: vec!["octahedron".into()],
-        uv: None,
-    };
-    let m = Mesh::new(raw).unwrap().0;
+    let m = flatmesh::corpus::octahedron();
     let out = fl_mesh::run(&m, &Params::default(), &Silent::default()).unwrap();
     assert_eq!(sj(&out.summary)["converged"], serde_json::json!(false));
     let stuck = sj(&out.summary)["stuck_vertices"]

@@ -114,30 +114,7 @@ fn seams_split_patches_but_keep_the_surface_whole() {
 #[test]
 fn closed_surface_total_defect_is_4pi() {
     // An octahedron: χ = 2, every vertex has defect 2π − 4·π/3.
-    let p = [
-        [1.0, 0.0, 0.0],
-        [-1.0, 0.0, 0.0],
-        [0.0, 1.0, 0.0],
-        [0.0, -1.0, 0.0],
-        [0.0, 0.0, 1.0],
-        [0.0, 0.0, -1.0],
-    ];
-    let t = vec![
-        [0, 2, 4],
-        [2, 1, 4],
-        [1, 3, 4],
-        [3, 0, 4],
-        [2, 0, 5],
-        [1, 2, 5],
-        [3, 1, 5],
-        [0, 3, 5],
-    ];
-    let (m, _) = Mesh::new(RawMesh {
-        positions: p.to_vec(),
-        triangles: t,
-        ..RawMesh::default()
-    })
-    .unwrap();
+    let m = flatmesh::corpus::octahedron();
     let r = Report::compute(&m, &[]);
     assert_eq!(r.interior_vertices, 6);
     assert_eq!(r.boundary_loops, 0);

@@ -72,6 +72,18 @@ pub enum AlgoError {
     Input(String),
 }
 
+/// How far each vertex moved from `a` to `b` (same vertex numbering).
+pub(crate) fn displacement(a: &Mesh, b: &Mesh) -> Vec<f64> {
+    a.positions()
+        .iter()
+        .zip(b.positions())
+        .map(|(&p, &q)| {
+            let d = crate::mesh::sub(p, q);
+            crate::mesh::dot(d, d).sqrt()
+        })
+        .collect()
+}
+
 /// An [`AlgoError::InvalidParam`] naming `key` (parameter range checks).
 pub(crate) fn bad_param(key: &str, message: &str) -> AlgoError {
     AlgoError::InvalidParam {

@@ -505,15 +505,7 @@ fn summarise(
     model.g(start.positions(), &mut g0);
     model.g(out.positions(), &mut g1);
     let tol = params.tolerance();
-    let displacement: Vec<f64> = start
-        .positions()
-        .iter()
-        .zip(out.positions())
-        .map(|(&a, &b)| {
-            let d = crate::mesh::sub(a, b);
-            crate::mesh::dot(d, d).sqrt()
-        })
-        .collect();
+    let displacement = super::displacement(start, out);
     let mut stuck: Vec<u32> = (0..nv as u32)
         .filter(|&v| g1[v as usize].abs() > tol)
         .collect();

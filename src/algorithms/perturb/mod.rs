@@ -340,15 +340,7 @@ pub fn run(
     let out = mesh
         .with_positions(run.positions)
         .map_err(|e| AlgoError::Input(format!("the perturbed mesh is invalid: {e}")))?;
-    let displacement: Vec<f64> = mesh
-        .positions()
-        .iter()
-        .zip(out.positions())
-        .map(|(&a, &b)| {
-            let d = crate::mesh::sub(a, b);
-            crate::mesh::dot(d, d).sqrt()
-        })
-        .collect();
+    let displacement = super::displacement(mesh, &out);
     let body_figures = body.as_ref().map(|b| {
         let before: Vec<f64> = mesh
             .positions()
