@@ -760,3 +760,41 @@ fn loop_with_the_papers_penalty_solver_reports_its_table() {
     );
     assert_eq!(t.vertices[1], out.levels[0].num_vertices());
 }
+
+/// mh_shoes01 (Wang–Tang's example II is a shoe upper): whatever the stop, the output is never
+/// worse than the input, and either flattenable (recomputed) or its stuck vertices are named
+/// and the reason is a real stop (in 2026-11 it ends by `line_search` at g_max ≈ 3.5e-2).
+#[test]
+fn sqp_on_a_shoe_never_returns_worse_and_names_what_it_could_not_do() {
+    let rel = "shoe/mh_shoes01.obj";
+    let Some(path) = flatmesh::corpus::shared_mesh_for_tests(rel) else {
+        return;
+    };
+    let bytes = std::fs::read(&path).unwrap();
+    let mesh = flatmesh::io::load(&bytes, flatmesh::io::Format::Obj)
+        .unwrap()
+        .0;
+    let out = develop::run(&mesh, &Params::default(), &Silent::default()).unwrap();
+    let s = &out.summary;
+    let m = out.mesh.unwrap();
+    let gmax = |m: &Mesh| {
+        g_independent(m, m.positions())
+            .iter()
+            .fold(0.0f64, |a, x| a.max(x.abs()))
+    };
+    let (before, after) = (gmax(&mesh), gmax(&m));
+    assert!(after < before, "{before} -> {after}");
+    assert!((after - s.g_max_after).abs() < 1e-12);
+    if s.converged {
+        assert!(after <= 1e-6);
+    } else {
+        assert!(!s.stuck_vertices.is_empty());
+        assert!(matches!(
+            s.stop_reason,
+            Stop::Stall | Stop::LineSearch | Stop::MaxIterations
+        ));
+        let worst = s.stuck_vertices[0] as usize;
+        let g = g_independent(&m, m.positions());
+        assert!((g[worst].abs() - after).abs() < 1e-12, "worst first");
+    }
+}
