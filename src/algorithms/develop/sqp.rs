@@ -17,15 +17,15 @@
 //! converged 5 with κ = 0 (the t-shirt stalls at 2.0e-2, δS 2.9 %), 9 with κ⁰ = 10 (the
 //! t-shirt 9.4e-7 with δS 9.9 %, gf_dress, pf_try3, bff_hemisphere newly), at the price of
 //! more stretch where the continuation runs out of iterations. `smoothness = 0` is the
-//! least-stretch model throughout. Each
-//! iteration solves the KKT system
+//! least-stretch model throughout. Each iteration solves the KKT system
 //!
 //! ```text
 //! [ H   Λᵀ ] [δ]   [ −∇f    ]
 //! [ Λ  −εI ] [y] = [ 2π − θ ]
 //! ```
 //!
-//! with H the Gauss–Newton Hessian of f (2 u uᵀ per edge, u its unit direction, plus 2μ I) and
+//! with H the Gauss–Newton Hessian of f (2 u uᵀ per edge, u its unit direction, plus 2μ I and
+//! κ's graph Laplacian), the (2,2) block −(ε + λ)I with the damping λ below, and
 //! Λ = ∂θ/∂v (FL Props. 1–2), in units of h̄ so that all blocks are O(1). The pattern is fixed,
 //! so the symbolic factorisation (AMD on the vertex graph, a vertex's x, y, z and y kept
 //! together) is computed once and only the numeric LDLᵀ every iteration.
@@ -39,16 +39,20 @@
 //! that ratio (a large λ shortens the normal step where θ's linearisation is poor); w is
 //! halved after a refused trial, doubled after a good one, and cut further when δ_t would
 //! spoil more than half the predicted fall (with λ > 0 it is not exactly tangent). Once
-//! flattenable, a trial is taken when it lowers f and stays flattenable. Trials that make a
-//! triangle degenerate are refused. Measured against the first version (ℓ1 merit with Armijo
+//! flattenable, a trial is pulled back onto the constraints by up to four corrections
+//! (re-solves with the same factorisation against the residual at the trial) and taken when
+//! it lowers f and is flattenable; while not, up to four such corrections follow a taken step
+//! as long as each quarters Σ(2π − θ)². Trials that make a triangle degenerate are refused.
+//! Measured with κ = 0 against the first version (ℓ1 merit with Armijo
 //! backtracking and λ on H's diagonal, issue 16 note): on the t-shirt g_max 6.2e-3 with
 //! δS 14 % became 2.0e-2 with δS 2.9 %; on mh_shoes01 0.48 → 0.037; gf_dress 0.127 (no step
 //! taken) → 4.6e-3. Neither converges yet on most real garments (they stall with every
 //! interior vertex at a similar g: a local minimum of Σ(2π − θ)² that fl-mesh leaves by
 //! refinement and non-monotone steps).
 //!
-//! Stop: converged when g_max ≤ `tolerance` and the step has fallen below `step_tolerance`
-//! h̄ or w below 1e-3 (a stationary point of Eq. 8, not just the first flattenable iterate);
+//! Stop: converged when g_max ≤ `tolerance`, κ has reached 0 and the step has fallen below
+//! `step_tolerance` h̄ or w below 1e-3 (a stationary point of Eq. 8, not just the first
+//! flattenable iterate; a run that is flattenable but not there yet says so in its detail);
 //! `stall` when g_max has not halved in `stall_iterations`; `line_search` when λ passes 1e8.
 //! The best iterate is returned: the feasible one with the least f, else the one with the
 //! least g_max.
