@@ -101,6 +101,33 @@ fn g_independent(mesh: &Mesh, pos: &[[f64; 3]]) -> Vec<f64> {
         .collect()
 }
 
+/// Edge lengths recomputed here.
+fn lengths(mesh: &Mesh, pos: &[[f64; 3]]) -> Vec<f64> {
+    mesh.conn()
+        .edges()
+        .iter()
+        .map(|e| norm(sub(pos[e[0] as usize], pos[e[1] as usize])))
+        .collect()
+}
+
+/// max |g| from [`g_independent`].
+fn g_max_independent(mesh: &Mesh) -> f64 {
+    g_independent(mesh, mesh.positions())
+        .iter()
+        .fold(0.0f64, |a, x| a.max(x.abs()))
+}
+
+/// A mesh of ../shared/meshes, or None (with the visible skip) when it is absent.
+fn load_shared(rel: &str) -> Option<Mesh> {
+    let path = flatmesh::corpus::shared_mesh_for_tests(rel)?;
+    let bytes = std::fs::read(&path).unwrap();
+    Some(
+        flatmesh::io::load(&bytes, flatmesh::io::Format::Obj)
+            .unwrap()
+            .0,
+    )
+}
+
 fn e_independent(mesh: &Mesh, rest: &[f64], pos: &[[f64; 3]]) -> f64 {
     mesh.conn()
         .edges()
@@ -154,7 +181,7 @@ fn gradients_of_e_g_and_j_match_central_differences_on_random_meshes_with_a_seam
         );
         // Rest lengths that differ from the current ones, so E's gradient is not zero.
         let mut rng = Rng(seed + 99);
-        let rest: Vec<f64> = develop::energy::edge_lengths(&mesh, mesh.positions())
+        let rest: Vec<f64> = lengths(&mesh, mesh.positions())
             .into_iter()
             .map(|l| l * (1.0 + 0.1 * rng.next()))
             .collect();
@@ -261,11 +288,7 @@ fn a_developable_input_comes_back_unchanged_after_zero_iterations() {
         .map(|n| (n.to_string(), load(n)))
         .collect();
     let rel = "garment/ipc_dress_knife_stage.obj";
-    if let Some(p) = flatmesh::corpus::shared_mesh_for_tests(rel) {
-        let bytes = std::fs::read(&p).unwrap();
-        let m = flatmesh::io::load(&bytes, flatmesh::io::Format::Obj)
-            .unwrap()
-            .0;
+    if let Some(m) = load_shared(rel) {
         assert!(m.num_patches() >= 14, "{rel}: {} patches", m.num_patches());
         meshes.push((rel.into(), m));
     }
@@ -348,13 +371,12 @@ fn sqp_makes_noisy_fixtures_exactly_developable_with_small_length_change() {
         let mesh = load(name);
         let out = develop::run(&mesh, &Params::default(), &Silent::default()).unwrap();
         let m = out.mesh.unwrap();
-        let g = g_independent(&m, m.positions());
-        let gmax = g.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+        let gmax = g_max_independent(&m);
         assert!(gmax <= 1e-6, "{name}: g_max {gmax}");
         assert!(out.summary.converged);
         // δS recomputed: the edges barely change length.
-        let l0 = develop::energy::edge_lengths(&mesh, mesh.positions());
-        let l1 = develop::energy::edge_lengths(&m, m.positions());
+        let l0 = lengths(&mesh, mesh.positions());
+        let l1 = lengths(&m, m.positions());
         let ds: f64 =
             l0.iter().zip(&l1).map(|(a, b)| (a - b).abs()).sum::<f64>() / l0.iter().sum::<f64>();
         assert!((ds - out.summary.delta_s).abs() <= 1e-12);
@@ -452,16 +474,14 @@ fn local_moves_only_along_the_original_normals_within_delta_t() {
             moved += usize::from(along != 0.0);
         }
         assert!(moved > 0);
-        let g = g_independent(&m, m.positions());
-        let gmax = g.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+        let gmax = g_max_independent(&m);
         match out.summary.stop_reason {
             Stop::Tolerance => assert!(gmax <= 1e-4, "stopped by ε with global g_max {gmax}"),
             Stop::Stalled => assert!(!out.summary.stalled_vertices.is_empty()),
             Stop::MaxMoves => {}
             other => panic!("local stopped by {other:?}"),
         }
-        let g0 = g_independent(&mesh, mesh.positions());
-        let g0max = g0.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+        let g0max = g_max_independent(&mesh);
         assert!(gmax < g0max, "{update:?} δ_T {delta_t}: {g0max} -> {gmax}");
     }
 }
@@ -622,26 +642,21 @@ fn loop_method_reports_the_table_and_every_level() {
 #[test]
 fn sqp_makes_the_diffavatar_tshirt_flattenable_and_reports_its_stretch() {
     let rel = "garment/diffavatar_tshirt.obj";
-    let Some(path) = flatmesh::corpus::shared_mesh_for_tests(rel) else {
+    let Some(mesh) = load_shared(rel) else {
         return;
     };
-    let bytes = std::fs::read(&path).unwrap();
-    let mesh = flatmesh::io::load(&bytes, flatmesh::io::Format::Obj)
-        .unwrap()
-        .0;
     let out = develop::run(&mesh, &Params::default(), &Silent::default()).unwrap();
     let m = out.mesh.unwrap();
     // Independent: angle sums with acos, lengths recomputed.
-    let g = g_independent(&m, m.positions());
-    let gmax = g.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+    let gmax = g_max_independent(&m);
     assert!(
         gmax <= 1e-6,
         "{rel}: g_max {gmax} ({})",
         out.summary.stop_detail
     );
     assert!(out.summary.converged);
-    let l0 = develop::energy::edge_lengths(&mesh, mesh.positions());
-    let l1 = develop::energy::edge_lengths(&m, m.positions());
+    let l0 = lengths(&mesh, mesh.positions());
+    let l1 = lengths(&m, m.positions());
     let ds = l0.iter().zip(&l1).map(|(a, b)| (a - b).abs()).sum::<f64>() / l0.iter().sum::<f64>();
     assert!(
         (ds - out.summary.delta_s).abs() <= 1e-12,
@@ -708,10 +723,7 @@ fn sqp_stops_by_max_iterations_with_its_best_iterate() {
     assert_eq!(out.summary.stop_reason, Stop::MaxIterations);
     assert!(!out.summary.converged);
     let m = out.mesh.unwrap();
-    let g = g_independent(&m, m.positions());
-    let gmax = g.iter().fold(0.0f64, |a, x| a.max(x.abs()));
-    let g0 = g_independent(&mesh, mesh.positions());
-    let g0max = g0.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+    let (gmax, g0max) = (g_max_independent(&m), g_max_independent(&mesh));
     assert!(gmax < g0max, "{g0max} -> {gmax}");
     assert!((gmax - out.summary.g_max_after).abs() < 1e-12);
 }
@@ -766,23 +778,13 @@ fn loop_with_the_papers_penalty_solver_reports_its_table() {
 /// and the reason is a real stop (in 2026-11 it ends by `line_search` at g_max ≈ 3.5e-2).
 #[test]
 fn sqp_on_a_shoe_never_returns_worse_and_names_what_it_could_not_do() {
-    let rel = "shoe/mh_shoes01.obj";
-    let Some(path) = flatmesh::corpus::shared_mesh_for_tests(rel) else {
+    let Some(mesh) = load_shared("shoe/mh_shoes01.obj") else {
         return;
     };
-    let bytes = std::fs::read(&path).unwrap();
-    let mesh = flatmesh::io::load(&bytes, flatmesh::io::Format::Obj)
-        .unwrap()
-        .0;
     let out = develop::run(&mesh, &Params::default(), &Silent::default()).unwrap();
     let s = &out.summary;
     let m = out.mesh.unwrap();
-    let gmax = |m: &Mesh| {
-        g_independent(m, m.positions())
-            .iter()
-            .fold(0.0f64, |a, x| a.max(x.abs()))
-    };
-    let (before, after) = (gmax(&mesh), gmax(&m));
+    let (before, after) = (g_max_independent(&mesh), g_max_independent(&m));
     assert!(after < before, "{before} -> {after}");
     assert!((after - s.g_max_after).abs() < 1e-12);
     if s.converged {

@@ -40,12 +40,20 @@ pub fn corner_angles(mesh: &Mesh) -> Vec<[f64; 3]> {
 /// θ(v): the sum of the corner angles at each vertex over all its faces (0 when unreferenced).
 pub fn angle_sums(mesh: &Mesh) -> Vec<f64> {
     let mut theta = vec![0.0; mesh.num_vertices()];
-    for (t, ang) in mesh.triangles().iter().zip(corner_angles(mesh)) {
-        for k in 0..3 {
-            theta[t[k] as usize] += ang[k];
-        }
-    }
+    angle_sums_into(mesh, mesh.positions(), &mut theta);
     theta
+}
+
+/// [`angle_sums`] with the mesh's connectivity and the positions `pos`, into `theta`
+/// (overwritten; an optimiser's iterate, without allocating).
+pub fn angle_sums_into(mesh: &Mesh, pos: &[[f64; 3]], theta: &mut [f64]) {
+    theta.fill(0.0);
+    for t in mesh.triangles() {
+        let [a, b, c] = t.map(|v| v as usize);
+        theta[a] += corner_angle(pos[a], pos[b], pos[c]);
+        theta[b] += corner_angle(pos[b], pos[c], pos[a]);
+        theta[c] += corner_angle(pos[c], pos[a], pos[b]);
+    }
 }
 
 /// θ(v) for one vertex, from its fan.
@@ -316,18 +324,23 @@ pub fn min_corner_angles(mesh: &Mesh) -> Vec<f64> {
 
 /// Mean edge length (0 for a mesh without edges): the length scale of a mesh.
 pub fn mean_edge_length(mesh: &Mesh) -> f64 {
-    let e = mesh.conn().edges();
-    if e.is_empty() {
+    let l = edge_lengths(mesh, mesh.positions());
+    if l.is_empty() {
         return 0.0;
     }
-    let p = mesh.positions();
-    e.iter()
+    l.iter().sum::<f64>() / l.len() as f64
+}
+
+/// Length of every edge of `mesh.conn().edges()` at positions `pos`.
+pub fn edge_lengths(mesh: &Mesh, pos: &[[f64; 3]]) -> Vec<f64> {
+    mesh.conn()
+        .edges()
+        .iter()
         .map(|e| {
-            let d = sub(p[e[0] as usize], p[e[1] as usize]);
+            let d = sub(pos[e[0] as usize], pos[e[1] as usize]);
             dot(d, d).sqrt()
         })
-        .sum::<f64>()
-        / e.len() as f64
+        .collect()
 }
 
 /// Turning angle φ ∈ [0, π] between the normals of triangles (i, j, k) and (j, i, l) across

@@ -10,7 +10,7 @@
 //! quantity (G_P is the part of G that depends on v) computed approximately. Gradients are
 //! checked against central differences in tests/develop.rs.
 
-use crate::geometry::{corner_angle, corner_angle_gradient};
+use crate::geometry::corner_angle_gradient;
 use crate::mesh::{dot, sub, Mesh};
 use std::f64::consts::TAU;
 
@@ -26,7 +26,7 @@ pub struct Model<'a> {
 impl<'a> Model<'a> {
     /// The model whose rest lengths are the mesh's own edge lengths (E = 0 at the input).
     pub fn new(mesh: &'a Mesh) -> Self {
-        let rest = edge_lengths(mesh, mesh.positions());
+        let rest = crate::geometry::edge_lengths(mesh, mesh.positions());
         Self::with_rest(mesh, rest)
     }
 
@@ -96,13 +96,7 @@ impl<'a> Model<'a> {
 
     /// g per vertex (Eq. 5) into `g` (overwritten): 2π − θ at interior vertices, 0 elsewhere.
     pub fn g(&self, pos: &[[f64; 3]], g: &mut [f64]) {
-        g.fill(0.0);
-        for t in self.mesh.triangles() {
-            let [a, b, c] = t.map(|v| v as usize);
-            g[a] += corner_angle(pos[a], pos[b], pos[c]);
-            g[b] += corner_angle(pos[b], pos[c], pos[a]);
-            g[c] += corner_angle(pos[c], pos[a], pos[b]);
-        }
+        crate::geometry::angle_sums_into(self.mesh, pos, g);
         for (v, gv) in g.iter_mut().enumerate() {
             *gv = if self.interior[v] { TAU - *gv } else { 0.0 };
         }
@@ -170,16 +164,4 @@ pub fn big_g(g: &[f64]) -> f64 {
 /// max |g|.
 pub fn g_max(g: &[f64]) -> f64 {
     g.iter().fold(0.0f64, |m, x| m.max(x.abs()))
-}
-
-/// Length of every edge of `mesh.conn().edges()` at positions `pos`.
-pub fn edge_lengths(mesh: &Mesh, pos: &[[f64; 3]]) -> Vec<f64> {
-    mesh.conn()
-        .edges()
-        .iter()
-        .map(|e| {
-            let d = sub(pos[e[0] as usize], pos[e[1] as usize]);
-            dot(d, d).sqrt()
-        })
-        .collect()
 }

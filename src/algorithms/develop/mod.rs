@@ -510,7 +510,7 @@ fn summarise(
         .filter(|&v| g1[v as usize].abs() > tol)
         .collect();
     stuck.sort_by(|a, b| g1[*b as usize].abs().total_cmp(&g1[*a as usize].abs()));
-    let lengths = energy::edge_lengths(out, out.positions());
+    let lengths = crate::geometry::edge_lengths(out, out.positions());
     let d = params
         .d_tolerance
         .iter()

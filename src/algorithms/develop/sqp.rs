@@ -179,7 +179,7 @@ pub(super) fn run(
             }
         }
         if let Err(e) = kkt
-            .fill(model, &pos, mu, kappa, damping)
+            .fill(model, &pos, h, mu, kappa, damping)
             .and_then(|()| kkt.solve_two())
         {
             // A failed factorisation ends the run with the best iterate, not the job.
@@ -520,12 +520,12 @@ impl Kkt {
         &mut self,
         model: &Model<'_>,
         pos: &[[f64; 3]],
+        h: f64,
         mu: f64,
         kappa: f64,
         damping: f64,
     ) -> Result<(), AlgoError> {
         let mesh = model.mesh();
-        let h = crate::geometry::mean_edge_length(mesh);
         self.values.fill(0.0);
         for &d in &self.diag_at {
             // Lower 3×3 in the order (0,0), (1,0), (1,1), (2,0), (2,1), (2,2).
