@@ -300,7 +300,7 @@ pub(super) fn run(
             e: model.e(&pos),
             rho: None,
             cg_steps: None,
-            step_length: Some(if accepted { weight } else { 0.0 }),
+            step_length: Some(if accepted { w } else { 0.0 }),
             damping: Some(damping),
         });
         control.progress(&Progress {
