@@ -729,7 +729,7 @@ fn sqp_stops_by_max_iterations_with_its_best_iterate() {
 }
 
 /// A closed octahedron (χ = 2): Gauss–Bonnet makes 2π at every vertex impossible, so its
-/// vertices are left out of g, counted, and nothing moves.
+/// vertices are left where they are, counted, and the run is not converged.
 #[test]
 fn a_closed_sphere_like_mesh_is_reported_impossible_not_crashed_on() {
     let mesh = flatmesh::corpus::octahedron();
@@ -737,6 +737,17 @@ fn a_closed_sphere_like_mesh_is_reported_impossible_not_crashed_on() {
         let out = develop::run(&mesh, &p, &Silent::default()).unwrap();
         assert_eq!(out.summary.impossible_vertices, 6);
         assert_eq!(out.summary.iterations, 0);
+        // Not converged: every vertex's defect is 2π − 4π/3, named as stuck.
+        assert!(!out.summary.converged);
+        assert!(
+            (out.summary.g_max_after - (TAU - 4.0 * std::f64::consts::FRAC_PI_3)).abs() < 1e-12
+        );
+        assert_eq!(out.summary.stuck_vertices.len(), 6);
+        assert!(
+            out.summary.stop_detail.contains("Gauss–Bonnet"),
+            "{}",
+            out.summary.stop_detail
+        );
         assert_eq!(out.mesh.unwrap().positions(), mesh.positions());
     }
 }

@@ -389,7 +389,8 @@ pub struct Summary {
     /// `local`: vertices stalled above ε at the end (refused or clamped moves), worst first.
     pub stalled_vertices: Vec<u32>,
     /// Interior vertices of closed components with Euler characteristic ≠ 0 (Gauss–Bonnet:
-    /// they cannot all reach 2π); left out of g.
+    /// they cannot all reach 2π): the solver leaves them where they are; every figure here
+    /// (g_max, G, converged, stuck_vertices) still counts them.
     pub impossible_vertices: usize,
     /// Per iteration (`global`, `loop`).
     pub history: Vec<HistoryEntry>,
@@ -426,6 +427,20 @@ pub fn developability(mesh: &Mesh, tolerance: f64) -> f64 {
 /// Most faces a `loop` run may subdivide to (memory: the solver's factor grows faster than
 /// the faces; 1M faces is about 500k vertices).
 pub const MAX_LOOP_FACES: usize = 1_000_000;
+
+/// 2π − θ at every interior vertex, 0 elsewhere (Eq. 5), straight from `geometry`.
+fn defects(mesh: &Mesh) -> Vec<f64> {
+    let theta = crate::geometry::angle_sums(mesh);
+    (0..mesh.num_vertices() as u32)
+        .map(|v| {
+            if mesh.conn().is_interior(v) {
+                std::f64::consts::TAU - theta[v as usize]
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
 
 /// Run `develop`.
 pub fn run(
@@ -500,10 +515,12 @@ fn summarise(
     params: &Params,
 ) -> Summary {
     let nv = start.num_vertices();
-    let mut g0 = vec![0.0; nv];
-    let mut g1 = vec![0.0; nv];
-    model.g(start.positions(), &mut g0);
-    model.g(out.positions(), &mut g1);
+    // Measured on every interior vertex, those of closed components that cannot become
+    // flattenable included (the solver leaves them out; the figures must not).
+    let (g0, g1) = (defects(start), defects(out));
+    let impossible = (0..nv)
+        .filter(|&v| start.conn().is_interior(v as u32) && !model.is_interior(v))
+        .count();
     let tol = params.tolerance();
     let displacement = super::displacement(start, out);
     let mut stuck: Vec<u32> = (0..nv as u32)
@@ -525,8 +542,7 @@ fn summarise(
             .chain(levels)
             .map(Mesh::num_vertices)
             .collect();
-        let mut g_in = vec![0.0; input.num_vertices()];
-        Model::new(input).g(input.positions(), &mut g_in);
+        let g_in = defects(input);
         LoopTable {
             levels: params.levels,
             vertices,
@@ -555,10 +571,18 @@ fn summarise(
         solver: (params.method != Method::Local).then_some(params.solver),
         converged: g_max(&g1) <= tol,
         stop_reason: run.stop,
-        stop_detail: if run.stop_detail.is_empty() {
-            run.stop.as_str().to_string()
-        } else {
-            run.stop_detail.clone()
+        stop_detail: match (run.stop_detail.is_empty(), impossible) {
+            (true, 0) => run.stop.as_str().to_string(),
+            (false, 0) => run.stop_detail.clone(),
+            (_, k) => format!(
+                "{}; {k} interior vertices lie on closed components whose Euler characteristic \
+                 is not 0, which no deformation makes flattenable (Gauss–Bonnet)",
+                if run.stop_detail.is_empty() {
+                    run.stop.as_str()
+                } else {
+                    &run.stop_detail
+                }
+            ),
         },
         iterations: run.iterations,
         inner_steps: run.inner,
@@ -576,9 +600,7 @@ fn summarise(
         displacement,
         stuck_vertices: stuck,
         stalled_vertices: run.stalled.clone(),
-        impossible_vertices: (0..nv)
-            .filter(|&v| start.conn().is_interior(v as u32) && !model.is_interior(v))
-            .count(),
+        impossible_vertices: impossible,
         history: run.history.clone(),
         table,
     }
