@@ -9,6 +9,7 @@ pub mod fl_mesh;
 pub mod flatten;
 pub mod perturb;
 pub mod report_job;
+pub mod segment;
 pub mod subdivide;
 
 use crate::mesh::Mesh;

@@ -9,8 +9,8 @@
 pub mod artifacts;
 
 use crate::algorithms::{
-    self, develop, fl_mesh, flatten, parse_params, perturb, report_job, subdivide, AlgoError,
-    Control,
+    self, develop, fl_mesh, flatten, parse_params, perturb, report_job, segment, subdivide,
+    AlgoError, Control,
 };
 use crate::mesh::Mesh;
 use serde::Serialize;
@@ -30,6 +30,8 @@ pub enum Kind {
     Perturb,
     /// Developability by minimum deformation (Wang–Tang, Su et al.).
     Develop,
+    /// Quasi-developable segmentation (VSA, min-cut, LPFB merging) and its patterns.
+    Segment,
 }
 
 /// Whether a kind takes a reference body (`reference_mesh_id`, `--reference`).
@@ -45,13 +47,14 @@ pub enum Reference {
 
 impl Kind {
     /// Every kind, in the order the CLI and the API list them.
-    pub const ALL: [Kind; 6] = [
+    pub const ALL: [Kind; 7] = [
         Kind::Report,
         Kind::Flatten,
         Kind::FlMesh,
         Kind::Subdivide,
         Kind::Perturb,
         Kind::Develop,
+        Kind::Segment,
     ];
 
     /// The kind's name in requests, on the command line and in the API.
@@ -63,6 +66,7 @@ impl Kind {
             Kind::Subdivide => "subdivide",
             Kind::Perturb => "perturb",
             Kind::Develop => "develop",
+            Kind::Segment => "segment",
         }
     }
 
@@ -102,6 +106,11 @@ impl Kind {
                  to its input length as θ = 2π at every interior vertex allows (global: exact \
                  SQP or the paper's penalty CG; local: moves along the normals; loop: Su et al., \
                  Loop subdivision first, also writes level_<k>.*)"
+            }
+            Kind::Segment => {
+                "cut the mesh into quasi-developable charts (Wang's LPFB segmentation: VSA, \
+                 min-cut refinement, merging while the merged chart flattens within the \
+                 bounds) and flatten them; the mesh written has one patch per chart"
             }
         }
     }
@@ -150,15 +159,27 @@ impl Kind {
                  length), max_moves (local: 500000), update=gauss_newton|newton (local: \
                  gauss_newton), relaxation (local gauss_newton: 1.8), levels (loop: 1)"
             }
+            Kind::Segment => {
+                "vsa_tolerance (5e-4: largest chart L^{2,1} error over the total area), \
+                 max_charts (256), lloyd_iterations (50), fuzzy_rings (3; 0 skips the min-cut), \
+                 max_area_distortion (10 %), max_l2_stretch (2.0), reject_overlap=true|false \
+                 (true), retry_rejected=true|false (true), merge=boundary|patch (boundary), \
+                 keep_patches=true|false (true: never across the input's seams), \
+                 interior=arap|harmonic (arap), boundary_angles=conformal|surface (conformal), \
+                 unit=mm|cm|dm|m|in (mm), input_unit=auto|mm|cm|dm|m|in (auto)"
+            }
         }
     }
 
     /// Whether it takes a reference body.
     pub fn reference(self) -> Reference {
         match self {
-            Kind::Report | Kind::Flatten | Kind::FlMesh | Kind::Subdivide | Kind::Develop => {
-                Reference::None
-            }
+            Kind::Report
+            | Kind::Flatten
+            | Kind::FlMesh
+            | Kind::Subdivide
+            | Kind::Develop
+            | Kind::Segment => Reference::None,
             Kind::Perturb => Reference::Optional,
         }
     }
@@ -193,6 +214,8 @@ pub enum JobSpec {
     Perturb(perturb::Params),
     /// `develop`.
     Develop(develop::Params),
+    /// `segment`.
+    Segment(segment::Params),
 }
 
 impl JobSpec {
@@ -229,6 +252,11 @@ impl JobSpec {
                 p.check().map_err(SpecError::Params)?;
                 JobSpec::Develop(p)
             }
+            Kind::Segment => {
+                let p: segment::Params = parse_params(params).map_err(SpecError::Params)?;
+                p.check().map_err(SpecError::Params)?;
+                JobSpec::Segment(p)
+            }
         })
     }
 
@@ -256,6 +284,7 @@ impl JobSpec {
             JobSpec::Subdivide(_) => Kind::Subdivide,
             JobSpec::Perturb(_) => Kind::Perturb,
             JobSpec::Develop(_) => Kind::Develop,
+            JobSpec::Segment(_) => Kind::Segment,
         }
     }
 
@@ -268,6 +297,7 @@ impl JobSpec {
             JobSpec::Subdivide(p) => serde_json::to_value(p),
             JobSpec::Perturb(p) => serde_json::to_value(p),
             JobSpec::Develop(p) => serde_json::to_value(p),
+            JobSpec::Segment(p) => serde_json::to_value(p),
         }
         .unwrap_or_default()
     }
@@ -291,6 +321,7 @@ impl JobSpec {
                 perturb::run(mesh, input.reference.as_ref(), p, control)?.into_job(Figures::Perturb)
             }
             JobSpec::Develop(p) => develop::run(mesh, p, control)?.into_job(Figures::Develop),
+            JobSpec::Segment(p) => segment::run(mesh, p, control)?.into_job(Figures::Segment),
         })
     }
 }
@@ -320,13 +351,15 @@ pub enum Figures {
     Perturb(perturb::Summary),
     /// `develop`.
     Develop(develop::Summary),
+    /// `segment`.
+    Segment(segment::Summary),
 }
 
 impl Figures {
     /// Whether an iterative kind converged (None for kinds that do not iterate).
     pub fn converged(&self) -> Option<bool> {
         match self {
-            Figures::Report(_) | Figures::Flatten(_) => None,
+            Figures::Report(_) | Figures::Flatten(_) | Figures::Segment(_) => None,
             Figures::FlMesh(s) => Some(s.report.converged),
             Figures::Subdivide(s) => Some(s.converged),
             Figures::Perturb(s) => Some(s.converged),
@@ -337,7 +370,7 @@ impl Figures {
     /// Why an iterative kind stopped.
     pub fn stop_reason(&self) -> Option<&str> {
         match self {
-            Figures::Report(_) | Figures::Flatten(_) => None,
+            Figures::Report(_) | Figures::Flatten(_) | Figures::Segment(_) => None,
             Figures::FlMesh(s) => Some(&s.report.stop_reason),
             Figures::Subdivide(s) => s.stop_reason.as_deref(),
             Figures::Perturb(s) => Some(&s.stop_detail),
@@ -348,7 +381,7 @@ impl Figures {
     /// Interior vertices an optimiser left above its tolerance.
     pub fn stuck_vertices(&self) -> &[u32] {
         match self {
-            Figures::Report(_) | Figures::Flatten(_) => &[],
+            Figures::Report(_) | Figures::Flatten(_) | Figures::Segment(_) => &[],
             Figures::FlMesh(s) => &s.report.stuck_vertices,
             Figures::Subdivide(s) => &s.stuck_vertices,
             Figures::Perturb(s) => &s.stuck_vertices,
@@ -360,6 +393,7 @@ impl Figures {
     pub fn warnings(&self) -> &[String] {
         match self {
             Figures::Flatten(s) => &s.job_warnings,
+            Figures::Segment(s) => &s.flatten.job_warnings,
             Figures::Perturb(s) => &s.warnings,
             Figures::Report(_)
             | Figures::FlMesh(_)

@@ -172,14 +172,20 @@ impl Piece3 {
         all_tris: &[[u32; 3]],
         all_pos: &[[f64; 3]],
     ) -> Result<Piece3, AlgoError> {
+        Self::build_cut(name, faces, all_tris, all_pos, &HashSet::new())
+    }
+
+    /// [`Piece3::build`], cut open along the edges in `cut` as well (global vertex pairs, lower
+    /// id first): segmentation's dangling cuts inside a chart.
+    pub(crate) fn build_cut(
+        name: String,
+        faces: Vec<u32>,
+        all_tris: &[[u32; 3]],
+        all_pos: &[[f64; 3]],
+        cut: &HashSet<(u32, u32)>,
+    ) -> Result<Piece3, AlgoError> {
         let gtris: Vec<[u32; 3]> = faces.iter().map(|&f| all_tris[f as usize]).collect();
-        Self::from_triangles(
-            name,
-            faces,
-            &gtris,
-            |v| all_pos[v as usize],
-            &HashSet::new(),
-        )
+        Self::from_triangles(name, faces, &gtris, |v| all_pos[v as usize], cut)
     }
 
     /// The same piece cut open along `paths` (local vertices): every path edge becomes two

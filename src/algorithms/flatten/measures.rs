@@ -216,6 +216,17 @@ pub fn boundary_intersections(uv: &[[f64; 2]], loops: &[Vec<u32>], vertex_ids: &
     count
 }
 
+/// For each vertex, the first vertex at bit-identical 3D position: copies of one surface
+/// point, whether split into wedges here or already split in the mesh (a slit cut into a
+/// segmentation chart), whose boundary segments may touch in 2D.
+fn coincident(pos: &[[f64; 3]]) -> Vec<u32> {
+    let mut first = std::collections::HashMap::with_capacity(pos.len());
+    pos.iter()
+        .enumerate()
+        .map(|(v, p)| *first.entry(p.map(f64::to_bits)).or_insert(v as u32))
+        .collect()
+}
+
 /// All measures of a piece: 3D positions and 2D positions of its vertices, its triangles,
 /// its boundary loops.
 pub fn compute(
@@ -328,7 +339,7 @@ pub fn compute(
         .filter(|&v| !on_boundary[v])
         .map(|v| (std::f64::consts::TAU - inner3d[v]).abs())
         .fold(0.0, f64::max);
-    m.boundary_intersections = boundary_intersections(uv, loops, vertex_ids);
+    m.boundary_intersections = boundary_intersections(uv, loops, &coincident(pos));
     m.overlap = (m.flipped_triangles > 0 || m.boundary_intersections > 0) as u8;
     m
 }

@@ -48,7 +48,7 @@ use crate::mesh::{Mesh, NONE};
 use crate::pattern::{Patterns, Piece, Seam};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::time::Instant;
 
 /// Flattening method.
@@ -564,6 +564,13 @@ pub fn flatten_piece(
 /// Seams: chains of mesh edges whose two faces lie in different pieces, grouped by piece
 /// pair and split into connected chains. Lengths in 3D and on both pieces.
 pub fn seams(mesh: &Mesh, pieces: &[Piece]) -> Vec<Seam> {
+    seams_and_slits(mesh, pieces, &HashSet::new())
+}
+
+/// [`seams`], plus the mesh edges in `slits` whose two faces lie in one piece that is cut
+/// there (segmentation's dangling cuts), each chain a seam of that piece with itself, side 0
+/// the first face of each edge.
+pub fn seams_and_slits(mesh: &Mesh, pieces: &[Piece], slits: &HashSet<u32>) -> Vec<Seam> {
     // global face → (piece, local triangle)
     let mut where_: Vec<(u32, u32)> = vec![(u32::MAX, 0); mesh.num_faces()];
     for (pi, p) in pieces.iter().enumerate() {
@@ -578,7 +585,7 @@ pub fn seams(mesh: &Mesh, pieces: &[Piece]) -> Vec<Seam> {
             continue;
         }
         let (pa, pb) = (where_[ef[0] as usize].0, where_[ef[1] as usize].0);
-        if pa != pb && pa != u32::MAX && pb != u32::MAX {
+        if (pa != pb || slits.contains(&(e as u32))) && pa != u32::MAX && pb != u32::MAX {
             groups.entry((pa.min(pb), pa.max(pb))).or_default().push(e);
         }
     }
@@ -638,9 +645,15 @@ pub fn seams(mesh: &Mesh, pieces: &[Piece]) -> Vec<Seam> {
             for &e in &ch {
                 let [a, b] = conn.edges()[e];
                 s.length_3d += cut::dist(mesh.position(a), mesh.position(b));
-                for &f in &conn.edge_faces()[e] {
+                for (j, &f) in conn.edge_faces()[e].iter().enumerate() {
                     let pi = where_[f as usize].0;
-                    let side = if pi == k.0 { 0 } else { 1 };
+                    let side = if k.0 == k.1 {
+                        j
+                    } else if pi == k.0 {
+                        0
+                    } else {
+                        1
+                    };
                     if let (Some(ua), Some(ub)) = (uv_of(pi, f, a), uv_of(pi, f, b)) {
                         s.lengths[side] += d2(ua, ub);
                         let p = &pieces[pi as usize];
@@ -833,6 +846,16 @@ pub struct SeamSummary {
     pub lengths: [f64; 2],
 }
 
+impl From<&Seam> for SeamSummary {
+    fn from(s: &Seam) -> Self {
+        SeamSummary {
+            patches: s.patches.clone(),
+            length_3d: s.length_3d,
+            lengths: s.lengths,
+        }
+    }
+}
+
 /// Seconds per stage of `flatten`.
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct Timings {
@@ -934,14 +957,7 @@ pub fn run(
                 solver: i.clone(),
             })
             .collect(),
-        seams: seams
-            .iter()
-            .map(|s| SeamSummary {
-                patches: s.patches.clone(),
-                length_3d: s.length_3d,
-                lengths: s.lengths,
-            })
-            .collect(),
+        seams: seams.iter().map(SeamSummary::from).collect(),
         job_warnings,
         all_converged: infos.iter().all(|i| i.converged),
         timings: Timings {

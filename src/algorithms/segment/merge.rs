@@ -1,0 +1,491 @@
+//! Step 4: boundary-based LPFB merging (wang-lpfb Sec. 4.2, steps 1–11).
+//!
+//! A boundary curve is a maximal chain of mesh edges whose two faces lie in the same
+//! unordered pair of charts, ending where three charts meet, at the mesh boundary, or where
+//! the pair changes (paper-notes D.3); a pair of charts may share several. A max heap holds
+//! every curve keyed by the area of its two charts (ties: the longer curve, then the lower
+//! id). Popping ζ, the candidate is both charts' faces with every cut edge except ζ's kept
+//! as a cut (other curves between the same charts, dangling cuts of earlier merges); it is
+//! refused before flattening unless it is one connected disk, with or without holes, and
+//! then flattened by exactly the pipeline `flatten` runs (so what is accepted is what the
+//! user downloads) and accepted when |A(Ω)| ≤ `max_area_distortion` (Eq. 19, taken in
+//! absolute value: a saddle-shaped chart shrinks), L² ≤ `max_l2_stretch` and, with
+//! `reject_overlap`, no overlap. Accepting removes ζ only: the charts' other common curves
+//! become dangling cuts ("converted into cuts when generating charts").
+//!
+//! Step 10 is ambiguous about curves refused earlier: with `retry_rejected` (default) every
+//! curve of the merged chart goes back into the heap, since its test depended on a chart that
+//! has changed; without it, refused curves stay refused (the paper read literally). Each
+//! (curve, chart versions) is tested once, so the loop ends.
+//!
+//! `merge = patch` is Fig. 6(a): a merge removes every curve between the two charts.
+//!
+//! Candidates are tested in parallel in batches of the heap's top entries and committed in
+//! heap order; a commit ends the batch (entries it made stale go back), and results are
+//! cached by (curve, chart versions), so the charts are exactly those of the sequential loop
+//! whatever the thread count.
+
+use super::dual::Dual;
+use crate::algorithms::flatten::{self, cut::Piece3};
+use crate::algorithms::{AlgoError, Control, Progress};
+use crate::mesh::{Mesh, VertexKind, NONE};
+use rayon::prelude::*;
+use serde::Serialize;
+use std::cmp::Ordering;
+use std::collections::{BinaryHeap, HashMap, HashSet};
+
+/// What the acceptance test needs.
+#[derive(Debug, Clone)]
+pub struct Criteria {
+    /// Largest |A(Ω)| in percent.
+    pub max_area_distortion: f64,
+    /// Largest L² stretch.
+    pub max_l2_stretch: f64,
+    /// Refuse a flattening that overlaps itself.
+    pub reject_overlap: bool,
+    /// Put curves refused earlier back in the heap when one of their charts grows.
+    pub retry_rejected: bool,
+    /// Remove every curve between the two charts (patch-based) instead of one.
+    pub patch_based: bool,
+    /// How candidates are flattened.
+    pub flatten: flatten::Params,
+}
+
+/// One tested candidate of the merge log.
+#[derive(Debug, Clone, Serialize)]
+pub struct Candidate {
+    /// Curve id.
+    pub curve: u32,
+    /// The two charts (ids as they were at the test).
+    pub charts: [u32; 2],
+    /// Faces of the merged chart.
+    pub faces: usize,
+    /// A(Ω) in percent (signed, Eq. 19), when flattened.
+    pub area_distortion_pct: Option<f64>,
+    /// L² stretch, when flattened.
+    pub l2_stretch: Option<f64>,
+    /// Overlap S(Ω), when flattened.
+    pub overlap: Option<u8>,
+    /// Accepted.
+    pub accepted: bool,
+    /// Why not, when refused.
+    pub reason: Option<String>,
+}
+
+/// What merging produced.
+#[derive(Debug, Clone, Default)]
+pub struct Merged {
+    /// Chart of every face (ids of surviving charts, not renumbered).
+    pub labels: Vec<u32>,
+    /// Every edge left as a cut inside a chart (dangling), as mesh edge ids.
+    pub dangling: Vec<u32>,
+    /// Every edge between two faces that is cut (chart boundaries and dangling cuts).
+    pub cut: Vec<u32>,
+    /// Candidates in the order tested.
+    pub log: Vec<Candidate>,
+    /// Flattenings run (cache misses).
+    pub evaluations: usize,
+}
+
+/// Curve state.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum State {
+    Pending,
+    Refused,
+    Removed,
+    Dangling,
+}
+
+struct Curve {
+    edges: Vec<u32>,
+    /// A face on each side of the first edge (their charts are the curve's pair).
+    sides: [u32; 2],
+    length: f64,
+    state: State,
+}
+
+#[derive(PartialEq)]
+struct Entry {
+    key: f64,
+    length: f64,
+    curve: u32,
+    versions: [u32; 2],
+}
+impl Eq for Entry {}
+impl Ord for Entry {
+    fn cmp(&self, o: &Self) -> Ordering {
+        self.key
+            .total_cmp(&o.key)
+            .then(self.length.total_cmp(&o.length))
+            .then(o.curve.cmp(&self.curve))
+    }
+}
+impl PartialOrd for Entry {
+    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
+        Some(self.cmp(o))
+    }
+}
+
+/// Result of testing one candidate.
+#[derive(Clone)]
+struct Test {
+    faces: usize,
+    measures: Option<(f64, f64, u8)>,
+    refusal: Option<String>,
+}
+
+/// Merge the charts of `labels` (ids 0..k) greedily.
+pub fn run(
+    mesh: &Mesh,
+    dual: &Dual,
+    labels: &[u32],
+    k: usize,
+    criteria: &Criteria,
+    control: &dyn Control,
+) -> Result<Merged, AlgoError> {
+    let conn = mesh.conn();
+    let mut labels = labels.to_vec();
+    // Every edge between two faces of different charts (or patches, or across the free
+    // boundary) is a cut until a merge removes it.
+    let mut cut = vec![true; conn.edges().len()];
+    for f in 0..dual.len() {
+        for (g, e) in dual.arcs(f) {
+            if labels[f] == labels[g] {
+                cut[e] = false;
+            }
+        }
+    }
+    let mut curves = find_curves(mesh, dual, &labels);
+    let mut area = vec![0.0; k];
+    for (f, &l) in labels.iter().enumerate() {
+        area[l as usize] += dual.area[f];
+    }
+    let mut version: Vec<u32> = (0..k as u32).collect();
+    let mut next_version = k as u32;
+    let pair = |labels: &[u32], c: &Curve| -> [u32; 2] {
+        let (a, b) = (labels[c.sides[0] as usize], labels[c.sides[1] as usize]);
+        [a.min(b), a.max(b)]
+    };
+    let mut heap = BinaryHeap::new();
+    for (i, c) in curves.iter().enumerate() {
+        let [a, b] = pair(&labels, c);
+        heap.push(Entry {
+            key: area[a as usize] + area[b as usize],
+            length: c.length,
+            curve: i as u32,
+            versions: [version[a as usize], version[b as usize]],
+        });
+    }
+    let mut out = Merged::default();
+    let mut cache: HashMap<(u32, [u32; 2]), Test> = HashMap::new();
+    let batch = 2 * rayon::current_num_threads().max(1);
+    let mut members: Vec<Vec<u32>> = vec![Vec::new(); k];
+    for (f, &l) in labels.iter().enumerate() {
+        members[l as usize].push(f as u32);
+    }
+    loop {
+        if control.cancelled() {
+            return Err(AlgoError::Cancelled);
+        }
+        // Step 3, a batch at a time: the top entries that are still current.
+        let mut top = Vec::new();
+        while top.len() < batch {
+            let Some(e) = heap.pop() else { break };
+            let c = &curves[e.curve as usize];
+            let [a, b] = pair(&labels, c);
+            if c.state == State::Pending
+                && a != b
+                && e.versions == [version[a as usize], version[b as usize]]
+            {
+                top.push(e);
+            }
+        }
+        if top.is_empty() {
+            break;
+        }
+        let todo: Vec<(u32, [u32; 2], [u32; 2])> = top
+            .iter()
+            .filter(|e| !cache.contains_key(&(e.curve, e.versions)))
+            .map(|e| {
+                (
+                    e.curve,
+                    pair(&labels, &curves[e.curve as usize]),
+                    e.versions,
+                )
+            })
+            .collect();
+        let tested: Vec<Result<Test, AlgoError>> = todo
+            .par_iter()
+            .map(|&(ci, [a, b], _)| {
+                let removed = removed_edges(&curves, ci, [a, b], &labels, criteria.patch_based);
+                test(mesh, &members, [a, b], &cut, &removed, criteria, control)
+            })
+            .collect();
+        for (t, (ci, _, v)) in tested.into_iter().zip(&todo) {
+            cache.insert((*ci, *v), t?);
+            out.evaluations += 1;
+        }
+        control.progress(&Progress {
+            stage: "merge".into(),
+            iteration: out.log.len(),
+            ..Progress::default()
+        });
+        let mut rest = top.into_iter();
+        for e in rest.by_ref() {
+            let ci = e.curve;
+            let [a, b] = pair(&labels, &curves[ci as usize]);
+            let t = &cache[&(ci, e.versions)];
+            let accepted = t.refusal.is_none();
+            out.log.push(Candidate {
+                curve: ci,
+                charts: [a, b],
+                faces: t.faces,
+                area_distortion_pct: t.measures.map(|m| m.0),
+                l2_stretch: t.measures.map(|m| m.1),
+                overlap: t.measures.map(|m| m.2),
+                accepted,
+                reason: t.refusal.clone(),
+            });
+            if !accepted {
+                curves[ci as usize].state = State::Refused;
+                continue;
+            }
+            // Step 9: b joins a.
+            for e in removed_edges(&curves, ci, [a, b], &labels, criteria.patch_based) {
+                cut[e as usize] = false;
+            }
+            let moved = std::mem::take(&mut members[b as usize]);
+            for &f in &moved {
+                labels[f as usize] = a;
+            }
+            members[a as usize].extend(moved);
+            members[a as usize].sort_unstable();
+            area[a as usize] += area[b as usize];
+            area[b as usize] = 0.0;
+            version[a as usize] = next_version;
+            version[b as usize] = NONE;
+            next_version += 1;
+            // Step 10: the merged chart's curves.
+            for (i, c) in curves.iter_mut().enumerate() {
+                let [p, q] = pair(&labels, c);
+                if c.edges.iter().all(|&e| !cut[e as usize]) {
+                    c.state = State::Removed;
+                    continue;
+                }
+                if p == q {
+                    if c.state != State::Removed {
+                        c.state = State::Dangling;
+                    }
+                    continue;
+                }
+                if p != a && q != a {
+                    continue;
+                }
+                if c.state == State::Refused && criteria.retry_rejected {
+                    c.state = State::Pending;
+                }
+                if c.state == State::Pending {
+                    heap.push(Entry {
+                        key: area[p as usize] + area[q as usize],
+                        length: c.length,
+                        curve: i as u32,
+                        versions: [version[p as usize], version[q as usize]],
+                    });
+                }
+            }
+            break;
+        }
+        heap.extend(rest);
+    }
+    for c in &curves {
+        if c.state == State::Dangling {
+            out.dangling.extend(c.edges.iter().copied());
+        }
+    }
+    out.dangling.sort_unstable();
+    let ef = mesh.conn().edge_faces();
+    out.cut = (0..cut.len() as u32)
+        .filter(|&e| cut[e as usize] && ef[e as usize][1] != NONE)
+        .collect();
+    out.labels = labels;
+    Ok(out)
+}
+
+/// The edges a merge along curve `ci` removes: its own, or with `patch_based` every curve's
+/// between the same two charts.
+fn removed_edges(
+    curves: &[Curve],
+    ci: u32,
+    charts: [u32; 2],
+    labels: &[u32],
+    patch_based: bool,
+) -> Vec<u32> {
+    if !patch_based {
+        return curves[ci as usize].edges.clone();
+    }
+    curves
+        .iter()
+        .filter(|c| {
+            let (a, b) = (labels[c.sides[0] as usize], labels[c.sides[1] as usize]);
+            [a.min(b), a.max(b)] == charts
+        })
+        .flat_map(|c| c.edges.iter().copied())
+        .collect()
+}
+
+/// Steps 4–8 for the union of two charts with `removed` no longer cut.
+fn test(
+    mesh: &Mesh,
+    members: &[Vec<u32>],
+    [a, b]: [u32; 2],
+    cut: &[bool],
+    removed: &[u32],
+    criteria: &Criteria,
+    control: &dyn Control,
+) -> Result<Test, AlgoError> {
+    let mut faces: Vec<u32> = members[a as usize]
+        .iter()
+        .chain(&members[b as usize])
+        .copied()
+        .collect();
+    faces.sort_unstable();
+    let refuse = |why: String| Test {
+        faces: faces.len(),
+        measures: None,
+        refusal: Some(why),
+    };
+    let removed: HashSet<u32> = removed.iter().copied().collect();
+    let conn = mesh.conn();
+    let mut cuts = HashSet::new();
+    for &f in &faces {
+        for i in 0..3 {
+            let e = conn.edge_of(3 * f + i);
+            if cut[e as usize] && !removed.contains(&e) {
+                let [p, q] = conn.edges()[e as usize];
+                cuts.insert((p.min(q), p.max(q)));
+            }
+        }
+    }
+    let piece = match Piece3::build_cut(
+        format!("chart {a}+{b}"),
+        faces.clone(),
+        mesh.triangles(),
+        mesh.positions(),
+        &cuts,
+    ) {
+        Ok(p) => p,
+        Err(AlgoError::Cancelled) => return Err(AlgoError::Cancelled),
+        Err(e) => return Ok(refuse(format!("topology: {e}"))),
+    };
+    if piece.loops.is_empty() {
+        return Ok(refuse("topology: closed (no boundary loop)".into()));
+    }
+    let (flat, _) = match flatten::flatten_piece(&piece, &criteria.flatten, control) {
+        Ok(r) => r,
+        Err(AlgoError::Cancelled) => return Err(AlgoError::Cancelled),
+        Err(e) => return Ok(refuse(format!("flattening failed: {e}"))),
+    };
+    let get = |k: &str| flat.measures.get(k).and_then(|v| v.as_f64());
+    let (Some(area), Some(l2), Some(overlap)) = (
+        get("area_distortion_pct"),
+        get("l2_stretch"),
+        get("overlap"),
+    ) else {
+        return Ok(refuse("flattening gave no measures".into()));
+    };
+    let overlap = overlap as u8;
+    let refusal = if area.is_nan() || area.abs() > criteria.max_area_distortion {
+        Some(format!(
+            "area distortion {area:.2} % exceeds {} %",
+            criteria.max_area_distortion
+        ))
+    } else if l2.is_nan() || l2 > criteria.max_l2_stretch {
+        Some(format!(
+            "L2 stretch {l2:.3} exceeds {}",
+            criteria.max_l2_stretch
+        ))
+    } else if criteria.reject_overlap && overlap != 0 {
+        Some("the flattening overlaps itself".into())
+    } else {
+        None
+    };
+    Ok(Test {
+        faces: faces.len(),
+        measures: Some((area, l2, overlap)),
+        refusal,
+    })
+}
+
+/// The boundary curves between charts.
+fn find_curves(mesh: &Mesh, dual: &Dual, labels: &[u32]) -> Vec<Curve> {
+    let conn = mesh.conn();
+    let edges = conn.edges();
+    let ef = conn.edge_faces();
+    // Inter-chart edges and their chart pair.
+    let mut pair_of: HashMap<u32, [u32; 2]> = HashMap::new();
+    for f in 0..dual.len() {
+        for (g, e) in dual.arcs(f) {
+            let (a, b) = (labels[f], labels[g]);
+            if a != b {
+                pair_of.insert(e as u32, [a.min(b), a.max(b)]);
+            }
+        }
+    }
+    let mut at: HashMap<u32, Vec<u32>> = HashMap::new();
+    let mut ids: Vec<u32> = pair_of.keys().copied().collect();
+    ids.sort_unstable();
+    for &e in &ids {
+        for v in edges[e as usize] {
+            at.entry(v).or_default().push(e);
+        }
+    }
+    // A chain passes through v only when v has exactly two such edges of one pair and is
+    // not on the mesh boundary or a seam.
+    let through = |v: u32, e: u32| -> Option<u32> {
+        if conn.kind(v) != VertexKind::Interior {
+            return None;
+        }
+        let list = &at[&v];
+        if list.len() != 2 {
+            return None;
+        }
+        let o = if list[0] == e { list[1] } else { list[0] };
+        (pair_of[&o] == pair_of[&e]).then_some(o)
+    };
+    let mut seen: HashSet<u32> = HashSet::new();
+    let mut curves = Vec::new();
+    for &e0 in &ids {
+        if seen.contains(&e0) {
+            continue;
+        }
+        seen.insert(e0);
+        // Walk away from each end of e0; the chain is the backward walk reversed, e0, then
+        // the forward walk.
+        let mut walks = [Vec::new(), Vec::new()];
+        for (walk, start) in walks.iter_mut().zip(edges[e0 as usize]) {
+            let (mut v, mut e) = (start, e0);
+            while let Some(o) = through(v, e) {
+                if !seen.insert(o) {
+                    break;
+                }
+                walk.push(o);
+                let [p, q] = edges[o as usize];
+                v = if p == v { q } else { p };
+                e = o;
+            }
+        }
+        let [mut chain, forward] = walks;
+        chain.reverse();
+        chain.push(e0);
+        chain.extend(forward);
+        let length = chain.iter().map(|&e| dual.edge_length[e as usize]).sum();
+        let [f, g] = ef[e0 as usize];
+        curves.push(Curve {
+            edges: chain,
+            sides: [f, g],
+            length,
+            state: State::Pending,
+        });
+    }
+    curves
+}

@@ -1,0 +1,430 @@
+//! `segment`: cut a mesh into quasi-developable charts and flatten them
+//! (wang-lpfb-quasi-developable-segmentation, Sec. 2 and 4; choices in paper-notes D).
+//!
+//! Stages, each a function of its own: [`vsa::run`] (error-controlled VSA into nearly planar
+//! charts), [`mincut::refine`] (min-cut smoothing of the chart boundaries in a fuzzy band),
+//! [`merge::run`] (greedy boundary-curve merging, accepted only when the merged chart
+//! flattens within the bounds), then the charts become the patches of a cut mesh whose
+//! dangling cuts are split, and that mesh is flattened by [`flatten::run`]: the patterns,
+//! seams and measures are exactly what `flatten` gives for it.
+//!
+//! Merging and the final flattening use the same flattening (`interior`, `boundary_angles`;
+//! holes closed by the paper's virtual cut), so every accepted chart's pattern is the one
+//! tested. The paper's LPFB + IP is `interior = harmonic, boundary_angles = surface`; the
+//! defaults are `flatten`'s (ARAP interior, conformal boundary angles), which flatten a
+//! chart with less stretch and so accept larger charts at the same bounds.
+//!
+//! Not done here (yet): the optional boundary denoising of step 3 (it moves the user's
+//! geometry) and `then = fl-mesh`.
+
+pub mod dual;
+pub mod merge;
+pub mod mincut;
+pub mod vsa;
+
+use super::flatten::{self, cut::Cuts, param};
+use super::flatten::{InputUnit, Unit};
+use super::{bad_param, AlgoError, Control, Outcome};
+use crate::mesh::{Mesh, RawMesh};
+use serde::{Deserialize, Serialize};
+use std::collections::HashSet;
+use std::time::Instant;
+
+/// How charts are merged.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum MergeMode {
+    /// Remove one boundary curve per merge (the paper's choice, Fig. 6b).
+    #[default]
+    Boundary,
+    /// Remove every curve between the two charts (Fig. 6a).
+    Patch,
+}
+
+fn d_vsa_tolerance() -> f64 {
+    5e-4
+}
+fn d_max_charts() -> usize {
+    256
+}
+fn d_lloyd() -> usize {
+    50
+}
+fn d_rings() -> usize {
+    3
+}
+fn d_area() -> f64 {
+    10.0
+}
+fn d_l2() -> f64 {
+    2.0
+}
+fn d_true() -> bool {
+    true
+}
+
+/// Parameters of `segment`; unknown keys are refused.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Params {
+    /// VSA stops adding charts when every chart's L^{2,1} error over the total area is at
+    /// most this (5e-4).
+    #[serde(default = "d_vsa_tolerance")]
+    pub vsa_tolerance: f64,
+    /// Most VSA charts (256).
+    #[serde(default = "d_max_charts")]
+    pub max_charts: usize,
+    /// Most Lloyd iterations per VSA round (50).
+    #[serde(default = "d_lloyd")]
+    pub lloyd_iterations: usize,
+    /// Width of the min-cut band in face rings around each boundary (3; 0 skips refinement).
+    #[serde(default = "d_rings")]
+    pub fuzzy_rings: usize,
+    /// Largest |A(Ω)| of a merged chart, percent (10, the paper's).
+    #[serde(default = "d_area")]
+    pub max_area_distortion: f64,
+    /// Largest L² stretch of a merged chart (2.0, the paper's).
+    #[serde(default = "d_l2")]
+    pub max_l2_stretch: f64,
+    /// Refuse a merge whose flattening overlaps itself (true).
+    #[serde(default = "d_true")]
+    pub reject_overlap: bool,
+    /// Test a refused curve again when one of its charts has grown (true).
+    #[serde(default = "d_true")]
+    pub retry_rejected: bool,
+    /// `boundary` (default: one curve per merge) or `patch`.
+    #[serde(default)]
+    pub merge: MergeMode,
+    /// Keep the input's patches: segment within each, never across its seams (true).
+    #[serde(default = "d_true")]
+    pub keep_patches: bool,
+    /// Interior solve of the flattening: `arap` (default) or `harmonic` (the paper's IP).
+    #[serde(default)]
+    pub interior: param::Interior,
+    /// LPFB's boundary angle targets: `conformal` (default) or `surface` (the paper's).
+    #[serde(default)]
+    pub boundary_angles: param::BoundaryAngles,
+    /// Unit of the SVG and DXF drawings (`mm` default, `cm`, `m`, `in`).
+    #[serde(default)]
+    pub unit: Unit,
+    /// Unit the mesh's coordinates are in (`auto` default: guessed from its size).
+    #[serde(default)]
+    pub input_unit: InputUnit,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Params {
+            vsa_tolerance: d_vsa_tolerance(),
+            max_charts: d_max_charts(),
+            lloyd_iterations: d_lloyd(),
+            fuzzy_rings: d_rings(),
+            max_area_distortion: d_area(),
+            max_l2_stretch: d_l2(),
+            reject_overlap: true,
+            retry_rejected: true,
+            merge: MergeMode::Boundary,
+            keep_patches: true,
+            interior: param::Interior::default(),
+            boundary_angles: param::BoundaryAngles::default(),
+            unit: Unit::default(),
+            input_unit: InputUnit::default(),
+        }
+    }
+}
+
+impl Params {
+    /// Range checks.
+    pub fn check(&self) -> Result<(), AlgoError> {
+        if !(self.vsa_tolerance > 0.0 && self.vsa_tolerance < 1.0) {
+            return Err(bad_param("vsa_tolerance", "must be in (0, 1)"));
+        }
+        if !(1..=4096).contains(&self.max_charts) {
+            return Err(bad_param("max_charts", "must be in 1..=4096"));
+        }
+        if !(1..=1000).contains(&self.lloyd_iterations) {
+            return Err(bad_param("lloyd_iterations", "must be in 1..=1000"));
+        }
+        if self.fuzzy_rings > 50 {
+            return Err(bad_param("fuzzy_rings", "must be in 0..=50"));
+        }
+        if !(self.max_area_distortion >= 0.0 && self.max_area_distortion <= 100.0) {
+            return Err(bad_param(
+                "max_area_distortion",
+                "must be in [0, 100] (percent)",
+            ));
+        }
+        if !(self.max_l2_stretch >= 1.0 && self.max_l2_stretch.is_finite()) {
+            return Err(bad_param(
+                "max_l2_stretch",
+                "must be at least 1 (no flattening stretches less) and finite",
+            ));
+        }
+        Ok(())
+    }
+
+    /// The flattening merging tests with and the output is made with.
+    fn flatten(&self) -> flatten::Params {
+        flatten::Params {
+            unit: self.unit,
+            input_unit: self.input_unit,
+            cuts: Cuts::Virtual,
+            interior: self.interior,
+            boundary_angles: self.boundary_angles,
+            ..flatten::Params::default()
+        }
+    }
+}
+
+/// Chart counts after each stage (the paper's "68 → 68 → 7").
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Counts {
+    /// After VSA.
+    pub vsa: usize,
+    /// After min-cut refinement (the same by construction).
+    pub refined: usize,
+    /// After merging.
+    pub merged: usize,
+}
+
+/// Seconds per stage.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Seconds {
+    /// VSA.
+    pub vsa: f64,
+    /// Min-cut refinement.
+    pub refine: f64,
+    /// Merging (every candidate's flattening included).
+    pub merge: f64,
+    /// Cutting the mesh and flattening the final charts.
+    pub flatten: f64,
+    /// Wall time.
+    pub total: f64,
+}
+
+/// What `segment` reports besides the cut mesh and the patterns.
+#[derive(Debug, Clone, Serialize)]
+pub struct Summary {
+    /// Chart counts per stage.
+    pub charts: Counts,
+    /// Largest E(R_i)/A over the VSA charts.
+    pub vsa_max_error: f64,
+    /// VSA seed-insertion rounds and Lloyd iterations.
+    pub vsa_rounds: usize,
+    /// Lloyd iterations over all rounds.
+    pub vsa_lloyd_iterations: usize,
+    /// Chart pairs cut by min-cut, skipped pairs, faces moved, island faces reassigned.
+    pub refine_pairs: usize,
+    /// Pairs skipped (a chart inside its band).
+    pub refine_skipped: usize,
+    /// Faces whose chart the min-cut changed.
+    pub refine_moved_faces: usize,
+    /// Faces reassigned to keep charts connected.
+    pub refine_island_faces: usize,
+    /// Candidates tested, in order, with their measures and the decision.
+    pub merge_log: Vec<merge::Candidate>,
+    /// Flattenings run while merging.
+    pub merge_evaluations: usize,
+    /// Edges left as cuts inside a chart (split in the output mesh).
+    pub dangling_edges: usize,
+    /// Final chart of every input face (the output mesh's patch of that face).
+    pub face_charts: Vec<u32>,
+    /// Input vertex of every output vertex (the output splits the dangling cuts).
+    pub vertex_map: Vec<u32>,
+    /// Worst |A(Ω)| (percent) and L² over the final pieces.
+    pub worst_area_distortion_pct: f64,
+    /// Worst L² stretch over the final pieces.
+    pub worst_l2_stretch: f64,
+    /// Every final piece is within the bounds and does not overlap.
+    pub all_within_bounds: bool,
+    /// The final flattening, as `flatten` reports it.
+    pub flatten: flatten::Summary,
+    /// Seconds per stage.
+    pub stage_seconds: Seconds,
+}
+
+/// Run `segment` on a mesh.
+pub fn run(
+    mesh: &Mesh,
+    params: &Params,
+    control: &dyn Control,
+) -> Result<Outcome<Summary>, AlgoError> {
+    params.check()?;
+    let t0 = Instant::now();
+    if mesh.num_faces() == 0 {
+        return Err(AlgoError::Input("the mesh has no faces".into()));
+    }
+    let dual = dual::Dual::new(mesh, params.keep_patches);
+    let v = vsa::run(
+        &dual,
+        params.vsa_tolerance,
+        params.max_charts,
+        params.lloyd_iterations,
+        control,
+    )?;
+    let k = v.proxies.len();
+    let t_vsa = t0.elapsed().as_secs_f64();
+    let mut labels = v.labels.clone();
+    let refinement = if params.fuzzy_rings > 0 {
+        mincut::refine(&dual, &mut labels, k, params.fuzzy_rings)
+    } else {
+        mincut::Refinement::default()
+    };
+    let refined = count(&labels);
+    let t_refine = t0.elapsed().as_secs_f64();
+    let criteria = merge::Criteria {
+        max_area_distortion: params.max_area_distortion,
+        max_l2_stretch: params.max_l2_stretch,
+        reject_overlap: params.reject_overlap,
+        retry_rejected: params.retry_rejected,
+        patch_based: params.merge == MergeMode::Patch,
+        flatten: params.flatten(),
+    };
+    let merged = merge::run(mesh, &dual, &labels, k, &criteria, control)?;
+    let t_merge = t0.elapsed().as_secs_f64();
+    let face_charts = renumber(&merged.labels);
+    let (cut_mesh, vertex_map) = cut_mesh(mesh, &face_charts, &merged.cut)?;
+    let mut flat = flatten::run(&cut_mesh, &criteria.flatten, control)?;
+    // Seams from the input, where the charts are still joined: each piece's vertices mapped
+    // back to input vertices (face by face, so two copies of one vertex stay apart).
+    if let Some(patterns) = flat.patterns.as_mut() {
+        let mut mapped = patterns.pieces.clone();
+        for p in &mut mapped {
+            for v in &mut p.vertex_ids {
+                *v = vertex_map[*v as usize];
+            }
+        }
+        let slits: HashSet<u32> = merged.dangling.iter().copied().collect();
+        patterns.seams = flatten::seams_and_slits(mesh, &mapped, &slits);
+        flat.summary.seams = patterns
+            .seams
+            .iter()
+            .map(flatten::SeamSummary::from)
+            .collect();
+    }
+    let mut worst_a: f64 = 0.0;
+    let mut worst_l2: f64 = 0.0;
+    let mut within = flat.summary.job_warnings.is_empty();
+    for p in &flat.summary.pieces {
+        let get = |k: &str| {
+            p.measures
+                .get(k)
+                .and_then(|v| v.as_f64())
+                .unwrap_or(f64::MAX)
+        };
+        let (a, l2, overlap) = (
+            get("area_distortion_pct").abs(),
+            get("l2_stretch"),
+            get("overlap"),
+        );
+        worst_a = worst_a.max(a);
+        worst_l2 = worst_l2.max(l2);
+        within &= a <= params.max_area_distortion
+            && l2 <= params.max_l2_stretch
+            && (!params.reject_overlap || overlap == 0.0);
+    }
+    let t_end = t0.elapsed().as_secs_f64();
+    let summary = Summary {
+        charts: Counts {
+            vsa: k,
+            refined,
+            merged: count(&face_charts),
+        },
+        vsa_max_error: v.errors.iter().copied().fold(0.0, f64::max),
+        vsa_rounds: v.rounds,
+        vsa_lloyd_iterations: v.lloyd_iterations,
+        refine_pairs: refinement.pairs.len(),
+        refine_skipped: refinement.skipped,
+        refine_moved_faces: refinement.pairs.iter().map(|p| p.moved).sum(),
+        refine_island_faces: refinement.islands,
+        merge_evaluations: merged.evaluations,
+        merge_log: merged.log,
+        dangling_edges: merged.dangling.len(),
+        face_charts,
+        vertex_map,
+        worst_area_distortion_pct: worst_a,
+        worst_l2_stretch: worst_l2,
+        all_within_bounds: within,
+        flatten: flat.summary,
+        stage_seconds: Seconds {
+            vsa: t_vsa,
+            refine: t_refine - t_vsa,
+            merge: t_merge - t_refine,
+            flatten: t_end - t_merge,
+            total: t_end,
+        },
+    };
+    Ok(Outcome {
+        mesh: Some(cut_mesh),
+        patterns: flat.patterns,
+        summary,
+        levels: Vec::new(),
+    })
+}
+
+/// Number of distinct labels.
+fn count(labels: &[u32]) -> usize {
+    labels.iter().collect::<HashSet<_>>().len()
+}
+
+/// Labels renumbered 0.. in order of each chart's lowest face.
+pub fn renumber(labels: &[u32]) -> Vec<u32> {
+    let mut map = std::collections::HashMap::new();
+    labels
+        .iter()
+        .map(|l| {
+            let n = map.len() as u32;
+            *map.entry(*l).or_insert(n)
+        })
+        .collect()
+}
+
+/// The mesh cut along `cut` (mesh edge ids: chart boundaries and dangling cuts), one patch
+/// per chart: its vertices (each an input vertex, `vertex_map`) and faces (the input's, in
+/// order). Charts are not welded to each other: a dangling cut that ends on a chart's
+/// boundary cannot be split in a mesh whose charts share vertices, and a re-flattening of
+/// this mesh must see exactly the pieces merging tested.
+pub fn cut_mesh(mesh: &Mesh, charts: &[u32], cut: &[u32]) -> Result<(Mesh, Vec<u32>), AlgoError> {
+    let edges = mesh.conn().edges();
+    let cut: HashSet<(u32, u32)> = cut
+        .iter()
+        .map(|&e| {
+            let [a, b] = edges[e as usize];
+            (a.min(b), a.max(b))
+        })
+        .collect();
+    let tris = mesh.triangles();
+    let (class, n, _) = flatten::cut::wedges(tris, |a, b| cut.contains(&(a, b)));
+    let mut vertex_map = vec![0u32; n];
+    for (c, &w) in class.iter().enumerate() {
+        vertex_map[w as usize] = tris[c / 3][c % 3];
+    }
+    let k = charts.iter().map(|&c| c as usize + 1).max().unwrap_or(0);
+    let src = mesh.patch_names();
+    let fp = mesh.face_patch();
+    let mut names = vec![String::new(); k];
+    for (f, &c) in charts.iter().enumerate() {
+        if names[c as usize].is_empty() {
+            names[c as usize] = if src.len() > 1 {
+                format!("{}.chart{}", src[fp[f] as usize], c)
+            } else {
+                format!("chart{c}")
+            };
+        }
+    }
+    let raw = RawMesh {
+        positions: vertex_map
+            .iter()
+            .map(|&v| mesh.positions()[v as usize])
+            .collect(),
+        triangles: (0..tris.len())
+            .map(|f| [class[3 * f], class[3 * f + 1], class[3 * f + 2]])
+            .collect(),
+        face_patch: charts.to_vec(),
+        patch_names: names,
+        uv: None,
+    };
+    let (m, _) = Mesh::new(raw)
+        .map_err(|e| AlgoError::Input(format!("cutting the mesh into its charts failed: {e}")))?;
+    Ok((m, vertex_map))
+}
