@@ -785,6 +785,50 @@ async fn develop_job_end_to_end() {
     assert_eq!(p["field"], "params.relaxation", "{p}");
 }
 
+/// A segment job on the saddle fixture: charts far fewer than VSA's, the mesh downloadable
+/// with one patch per chart, patterns with seams, and a bad parameter named.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn segment_job_end_to_end() {
+    let s = Server::start(&tmp("k-segment"), &[]);
+    let c = client();
+    let saddle = fixture("saddle");
+    let (input, _) = flatmesh::io::load(&saddle, flatmesh::io::Format::Obj).unwrap();
+    let km = upload(&c, &s, saddle).await;
+    let j = submit(&c, &s, json!({"kind": "segment", "mesh_id": km["id"]})).await;
+    let id = j["id"].as_str().unwrap();
+    let done = wait_for(&c, &s, id, &["succeeded", "failed"]).await;
+    assert_eq!(done["status"], "succeeded", "{done}");
+    let result = job_result(&c, &s, id).await;
+    let fig = &result["job"];
+    assert_eq!(fig["kind"], "segment");
+    let (vsa, merged) = (
+        fig["charts"]["vsa"].as_u64().unwrap(),
+        fig["charts"]["merged"].as_u64().unwrap(),
+    );
+    assert!(merged >= 1 && merged < vsa, "{}", fig["charts"]);
+    let out = download(&c, &s, &format!("/v1/jobs/{id}/mesh?format=obj")).await;
+    let (out, _) = flatmesh::io::load(&out, flatmesh::io::Format::Obj).unwrap();
+    assert_eq!(out.num_faces(), input.num_faces());
+    assert_eq!(out.num_patches() as u64, merged);
+    let patterns = download(&c, &s, &format!("/v1/jobs/{id}/patterns?format=json")).await;
+    let patterns: serde_json::Value = serde_json::from_slice(&patterns).unwrap();
+    assert_eq!(patterns["pieces"].as_array().unwrap().len() as u64, merged);
+    if merged > 1 {
+        assert!(
+            !patterns["seams"].as_array().unwrap().is_empty(),
+            "{patterns}"
+        );
+    }
+    let r = c
+        .post(s.url("/v1/jobs"))
+        .json(&json!({"kind": "segment", "mesh_id": km["id"], "params": {"max_l2_stretch": 0.5}}))
+        .send()
+        .await
+        .unwrap();
+    let p = problem(r, 422).await;
+    assert_eq!(p["field"], "params.max_l2_stretch", "{p}");
+}
+
 /// A subdivide job with a curve on a rim edge, and one with a curve it must refuse.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn subdivide_job_end_to_end() {

@@ -26,6 +26,7 @@
 //! whatever the thread count.
 
 use super::dual::Dual;
+use super::vsa;
 use crate::algorithms::flatten::{self, cut::Piece3};
 use crate::algorithms::{AlgoError, Control, Progress};
 use crate::mesh::{Mesh, VertexKind, NONE};
@@ -311,6 +312,89 @@ pub fn run(
     Ok(out)
 }
 
+/// Split every chart that does not pass the test on its own (VSA charts are only nearly
+/// planar: a ring round a limb, or a chart VSA left over its tolerance at `max_charts`, may
+/// not flatten within the bounds), in two by [`vsa::split`], until all pass. Merging tests
+/// only unions, so without this a chart nothing merged with could end outside the bounds.
+/// Returns the chart count and the number of splits.
+pub fn split_until_within(
+    mesh: &Mesh,
+    dual: &Dual,
+    labels: &mut [u32],
+    k: usize,
+    criteria: &Criteria,
+    control: &dyn Control,
+) -> Result<(usize, usize), AlgoError> {
+    let cut: Vec<bool> = {
+        let mut c = vec![true; mesh.conn().edges().len()];
+        for f in 0..dual.len() {
+            for (g, e) in dual.arcs(f) {
+                if labels[f] == labels[g] {
+                    c[e] = false;
+                }
+            }
+        }
+        c
+    };
+    let mut members: Vec<Vec<u32>> = vec![Vec::new(); k];
+    for (f, &l) in labels.iter().enumerate() {
+        members[l as usize].push(f as u32);
+    }
+    let mut todo: Vec<u32> = (0..k as u32).collect();
+    let mut splits = 0;
+    let mut cut = cut;
+    while !todo.is_empty() {
+        if control.cancelled() {
+            return Err(AlgoError::Cancelled);
+        }
+        let tests: Vec<Result<Test, AlgoError>> = todo
+            .par_iter()
+            .map(|&c| {
+                evaluate(
+                    mesh,
+                    members[c as usize].clone(),
+                    &cut,
+                    &[],
+                    criteria,
+                    control,
+                )
+            })
+            .collect();
+        let mut next = Vec::new();
+        for (&c, t) in todo.iter().zip(tests) {
+            if t?.refusal.is_none() || members[c as usize].len() < 2 {
+                continue;
+            }
+            let part = vsa::split(dual, &members[c as usize]);
+            let new = members.len() as u32;
+            let faces = std::mem::take(&mut members[c as usize]);
+            let (mut keep, mut moved) = (Vec::new(), Vec::new());
+            for (&f, &p) in faces.iter().zip(&part) {
+                if p {
+                    moved.push(f);
+                } else {
+                    keep.push(f);
+                }
+            }
+            for &f in &moved {
+                labels[f as usize] = new;
+            }
+            for &f in &moved {
+                for (g, e) in dual.arcs(f as usize) {
+                    cut[e] = labels[g] != labels[f as usize];
+                }
+            }
+            members[c as usize] = keep;
+            members.push(moved);
+            next.push(c);
+            next.push(new);
+            splits += 1;
+        }
+        todo = next;
+    }
+    Ok((members.len(), splits))
+}
+
 /// The edges a merge along curve `ci` removes: its own, or with `patch_based` every curve's
 /// between the same two charts.
 fn removed_edges(
@@ -349,6 +433,18 @@ fn test(
         .copied()
         .collect();
     faces.sort_unstable();
+    evaluate(mesh, faces, cut, removed, criteria, control)
+}
+
+/// Flatten the chart made of `faces`, cut along `cut` except `removed`, and judge it.
+fn evaluate(
+    mesh: &Mesh,
+    faces: Vec<u32>,
+    cut: &[bool],
+    removed: &[u32],
+    criteria: &Criteria,
+    control: &dyn Control,
+) -> Result<Test, AlgoError> {
     let refuse = |why: String| Test {
         faces: faces.len(),
         measures: None,
@@ -367,7 +463,7 @@ fn test(
         }
     }
     let piece = match Piece3::build_cut(
-        format!("chart {a}+{b}"),
+        format!("chart of face {}", faces[0]),
         faces.clone(),
         mesh.triangles(),
         mesh.positions(),

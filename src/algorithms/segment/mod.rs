@@ -3,7 +3,9 @@
 //!
 //! Stages, each a function of its own: [`vsa::run`] (error-controlled VSA into nearly planar
 //! charts), [`mincut::refine`] (min-cut smoothing of the chart boundaries in a fuzzy band),
-//! [`merge::run`] (greedy boundary-curve merging, accepted only when the merged chart
+//! [`merge::split_until_within`] (not in the paper: a chart that does not flatten within the
+//! bounds on its own is split in two until each does, so that every output chart has been
+//! tested), [`merge::run`] (greedy boundary-curve merging, accepted only when the merged chart
 //! flattens within the bounds), then the charts become the patches of a cut mesh whose
 //! dangling cuts are split, and that mesh is flattened by [`flatten::run`]: the patterns,
 //! seams and measures are exactly what `flatten` gives for it.
@@ -183,6 +185,8 @@ pub struct Counts {
     pub vsa: usize,
     /// After min-cut refinement (the same by construction).
     pub refined: usize,
+    /// After splitting the charts that do not flatten within the bounds on their own.
+    pub tested: usize,
     /// After merging.
     pub merged: usize,
 }
@@ -221,6 +225,8 @@ pub struct Summary {
     pub refine_moved_faces: usize,
     /// Faces reassigned to keep charts connected.
     pub refine_island_faces: usize,
+    /// Charts split in two because they did not flatten within the bounds on their own.
+    pub splits: usize,
     /// Candidates tested, in order, with their measures and the decision.
     pub merge_log: Vec<merge::Candidate>,
     /// Flattenings run while merging.
@@ -280,7 +286,9 @@ pub fn run(
         patch_based: params.merge == MergeMode::Patch,
         flatten: params.flatten(),
     };
-    let merged = merge::run(mesh, &dual, &labels, k, &criteria, control)?;
+    let (k_tested, splits) =
+        merge::split_until_within(mesh, &dual, &mut labels, k, &criteria, control)?;
+    let merged = merge::run(mesh, &dual, &labels, k_tested, &criteria, control)?;
     let t_merge = t0.elapsed().as_secs_f64();
     let face_charts = renumber(&merged.labels);
     let (cut_mesh, vertex_map) = cut_mesh(mesh, &face_charts, &merged.cut)?;
@@ -304,7 +312,9 @@ pub fn run(
     }
     let mut worst_a: f64 = 0.0;
     let mut worst_l2: f64 = 0.0;
-    let mut within = flat.summary.job_warnings.is_empty();
+    // Every chart flattened (none skipped) and each within the bounds; flatten's own
+    // warnings about distortion under the bounds do not count.
+    let mut within = flat.summary.pieces.len() == count(&face_charts);
     for p in &flat.summary.pieces {
         let get = |k: &str| {
             p.measures
@@ -328,6 +338,7 @@ pub fn run(
         charts: Counts {
             vsa: k,
             refined,
+            tested: k_tested,
             merged: count(&face_charts),
         },
         vsa_max_error: v.errors.iter().copied().fold(0.0, f64::max),
@@ -337,6 +348,7 @@ pub fn run(
         refine_skipped: refinement.skipped,
         refine_moved_faces: refinement.pairs.iter().map(|p| p.moved).sum(),
         refine_island_faces: refinement.islands,
+        splits,
         merge_evaluations: merged.evaluations,
         merge_log: merged.log,
         dangling_edges: merged.dangling.len(),

@@ -236,3 +236,100 @@ fn worst_faces(
     }
     worst.into_iter().map(|w| w.1).collect()
 }
+
+/// Two-proxy VSA inside one chart (`faces`, connected): seeds at the chart's lowest- and
+/// highest-error faces against its own proxy, flooded within the chart, a few Lloyd
+/// iterations. Returns, per face of `faces`, whether it went to the second part; both parts
+/// are connected and non-empty.
+pub fn split(dual: &Dual, faces: &[u32]) -> Vec<bool> {
+    let mut local = vec![NONE; dual.len()];
+    for (i, &f) in faces.iter().enumerate() {
+        local[f as usize] = i as u32;
+    }
+    let mut sum = [0.0f64; 3];
+    for &f in faces {
+        let (n, a) = (dual.normal[f as usize], dual.area[f as usize]);
+        for c in 0..3 {
+            sum[c] += a * n[c];
+        }
+    }
+    let proxy = crate::geometry::normalize(sum);
+    let err = |f: u32| face_error(dual, f as usize, proxy);
+    let lo = faces
+        .iter()
+        .copied()
+        .min_by(|&a, &b| err(a).total_cmp(&err(b)).then(a.cmp(&b)));
+    let hi = faces
+        .iter()
+        .copied()
+        .max_by(|&a, &b| err(a).total_cmp(&err(b)).then(b.cmp(&a)));
+    let (Some(lo), Some(mut hi)) = (lo, hi) else {
+        return vec![false; faces.len()];
+    };
+    if hi == lo {
+        hi = *faces.iter().find(|&&f| f != lo).unwrap_or(&lo);
+    }
+    let mut seeds = [lo as usize, hi as usize];
+    let mut proxies = [dual.normal[seeds[0]], dual.normal[seeds[1]]];
+    let mut part = vec![NONE; faces.len()];
+    let mut heap = BinaryHeap::new();
+    for _ in 0..10 {
+        part.fill(NONE);
+        heap.clear();
+        for (i, &s) in seeds.iter().enumerate() {
+            part[local[s] as usize] = i as u32;
+        }
+        for (i, &s) in seeds.iter().enumerate() {
+            for (g, _) in dual.arcs(s) {
+                if local[g] != NONE {
+                    heap.push(Entry(face_error(dual, g, proxies[i]), g as u32, i as u32));
+                }
+            }
+        }
+        while let Some(Entry(_, f, i)) = heap.pop() {
+            let l = local[f as usize] as usize;
+            if part[l] != NONE {
+                continue;
+            }
+            part[l] = i;
+            for (g, _) in dual.arcs(f as usize) {
+                if local[g] != NONE && part[local[g] as usize] == NONE {
+                    heap.push(Entry(face_error(dual, g, proxies[i as usize]), g as u32, i));
+                }
+            }
+        }
+        // Refit both proxies and reseed at each part's lowest-error face.
+        let mut sums = [[0.0f64; 3]; 2];
+        for (l, &f) in faces.iter().enumerate() {
+            let (n, a) = (dual.normal[f as usize], dual.area[f as usize]);
+            for c in 0..3 {
+                sums[part[l] as usize][c] += a * n[c];
+            }
+        }
+        let mut moved = false;
+        for i in 0..2 {
+            let n = crate::geometry::normalize(sums[i]);
+            if n != [0.0; 3] {
+                proxies[i] = n;
+            }
+            let best = faces
+                .iter()
+                .enumerate()
+                .filter(|&(l, _)| part[l] == i as u32)
+                .map(|(_, &f)| f as usize)
+                .min_by(|&a, &b| {
+                    face_error(dual, a, proxies[i])
+                        .total_cmp(&face_error(dual, b, proxies[i]))
+                        .then(a.cmp(&b))
+                });
+            if let Some(b) = best {
+                moved |= b != seeds[i];
+                seeds[i] = b;
+            }
+        }
+        if !moved {
+            break;
+        }
+    }
+    part.iter().map(|&p| p == 1).collect()
+}
