@@ -163,7 +163,7 @@ impl Kind {
                 "vsa_tolerance (5e-4: largest chart L^{2,1} error over the total area), \
                  max_charts (256), lloyd_iterations (50), fuzzy_rings (3; 0 skips the min-cut), \
                  max_area_distortion (10 %), max_l2_stretch (2.0), reject_overlap=true|false \
-                 (true), retry_rejected=true|false (true), merge=boundary|patch (boundary), \
+                 (true), retry_rejected=true|false (false), merge=boundary|patch (boundary), \
                  keep_patches=true|false (true: never across the input's seams), \
                  interior=arap|harmonic (arap), boundary_angles=conformal|surface (conformal), \
                  unit=mm|cm|dm|m|in (mm), input_unit=auto|mm|cm|dm|m|in (auto)"

@@ -91,8 +91,8 @@ pub struct Params {
     /// Refuse a merge whose flattening overlaps itself (true).
     #[serde(default = "d_true")]
     pub reject_overlap: bool,
-    /// Test a refused curve again when one of its charts has grown (true).
-    #[serde(default = "d_true")]
+    /// Test a refused curve again when one of its charts has grown (false: the paper).
+    #[serde(default)]
     pub retry_rejected: bool,
     /// `boundary` (default: one curve per merge) or `patch`.
     #[serde(default)]
@@ -124,7 +124,7 @@ impl Default for Params {
             max_area_distortion: d_area(),
             max_l2_stretch: d_l2(),
             reject_overlap: true,
-            retry_rejected: true,
+            retry_rejected: false,
             merge: MergeMode::Boundary,
             keep_patches: true,
             interior: param::Interior::default(),
