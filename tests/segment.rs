@@ -517,3 +517,51 @@ fn parameters_out_of_range_are_named() {
         }
     }
 }
+
+/// `then = fl-mesh`: fl-mesh converges, chart boundaries stay where they were (so the charts
+/// still sew together), and every pattern edge has its 3D length within 0.1 %, measured from
+/// the pieces and the output mesh.
+fn check_exact(name: &str, mesh: &Mesh) {
+    let params = Params {
+        then: segment::Then::FlMesh,
+        ..Params::default()
+    };
+    let out = run(mesh, &params);
+    let s = &out.summary;
+    let fl = s.fl_mesh.as_ref().expect("fl-mesh ran");
+    assert!(fl.converged, "{name}: {}", fl.stop_reason);
+    let cut = out.mesh.as_ref().unwrap();
+    for v in 0..cut.num_vertices() as u32 {
+        if cut.conn().kind(v) == flatmesh::mesh::VertexKind::Boundary {
+            assert_eq!(
+                cut.position(v),
+                mesh.position(s.vertex_map[v as usize]),
+                "{name}: boundary vertex {v} moved"
+            );
+        }
+    }
+    for p in &out.patterns.as_ref().unwrap().pieces {
+        let e = flatmesh::corpus::pattern_checks::edge_length_error(cut, p);
+        assert!(
+            e <= 1e-3,
+            "{name} {}: an edge is {:.3} % off its 3D length",
+            p.patch,
+            100.0 * e
+        );
+    }
+}
+
+#[test]
+fn then_fl_mesh_makes_every_chart_isometric() {
+    check_exact("saddle", &fixture("saddle"));
+    check_exact("hemisphere_cap", &fixture("hemisphere_cap"));
+    for rel in [
+        "garment/diffavatar_tshirt.obj",
+        "shoe/mh_shoes01.obj",
+        "classic/od_spot_lowres.obj",
+    ] {
+        if let Some(m) = shared(rel) {
+            check_exact(rel, &m);
+        }
+    }
+}

@@ -166,7 +166,10 @@ impl Kind {
                  (true), retry_rejected=true|false (false), merge=boundary|patch (boundary), \
                  keep_patches=true|false (true: never across the input's seams), \
                  interior=arap|harmonic (arap), boundary_angles=conformal|surface (conformal), \
-                 unit=mm|cm|dm|m|in (mm), input_unit=auto|mm|cm|dm|m|in (auto)"
+                 unit=mm|cm|dm|m|in (mm), input_unit=auto|mm|cm|dm|m|in (auto), \
+                 then=none|fl-mesh (none; fl-mesh: every chart made exactly flattenable, its \
+                 boundary fixed, before flattening), fl_mesh={...} (the fl-mesh parameters of \
+                 that run; refine must stay false)"
             }
         }
     }
@@ -359,7 +362,8 @@ impl Figures {
     /// Whether an iterative kind converged (None for kinds that do not iterate).
     pub fn converged(&self) -> Option<bool> {
         match self {
-            Figures::Report(_) | Figures::Flatten(_) | Figures::Segment(_) => None,
+            Figures::Report(_) | Figures::Flatten(_) => None,
+            Figures::Segment(s) => s.fl_mesh.as_ref().map(|r| r.converged),
             Figures::FlMesh(s) => Some(s.report.converged),
             Figures::Subdivide(s) => Some(s.converged),
             Figures::Perturb(s) => Some(s.converged),
@@ -370,7 +374,8 @@ impl Figures {
     /// Why an iterative kind stopped.
     pub fn stop_reason(&self) -> Option<&str> {
         match self {
-            Figures::Report(_) | Figures::Flatten(_) | Figures::Segment(_) => None,
+            Figures::Report(_) | Figures::Flatten(_) => None,
+            Figures::Segment(s) => s.fl_mesh.as_ref().map(|r| r.stop_reason.as_str()),
             Figures::FlMesh(s) => Some(&s.report.stop_reason),
             Figures::Subdivide(s) => s.stop_reason.as_deref(),
             Figures::Perturb(s) => Some(&s.stop_detail),
@@ -381,7 +386,8 @@ impl Figures {
     /// Interior vertices an optimiser left above its tolerance.
     pub fn stuck_vertices(&self) -> &[u32] {
         match self {
-            Figures::Report(_) | Figures::Flatten(_) | Figures::Segment(_) => &[],
+            Figures::Report(_) | Figures::Flatten(_) => &[],
+            Figures::Segment(s) => s.fl_mesh.as_ref().map_or(&[], |r| &r.stuck_vertices),
             Figures::FlMesh(s) => &s.report.stuck_vertices,
             Figures::Subdivide(s) => &s.stuck_vertices,
             Figures::Perturb(s) => &s.stuck_vertices,

@@ -16,14 +16,22 @@
 //! defaults are `flatten`'s (ARAP interior, conformal boundary angles), which flatten a
 //! chart with less stretch and so accept larger charts at the same bounds.
 //!
+//! Beyond the paper, which stops at quasi-developable charts: `then = fl-mesh` runs fl-mesh
+//! on the cut mesh before the final flattening. The charts are not welded to each other
+//! there, so every chart boundary is mesh boundary, which fl-mesh never moves: the charts
+//! still sew together, and each converged chart is exactly flattenable, its pattern isometric
+//! up to the solver tolerance. fl-mesh's refinement is refused there (it would add vertices
+//! and split faces, breaking the maps back to the input).
+//!
 //! Not done here (yet): the optional boundary denoising of step 3 (it moves the user's
-//! geometry) and `then = fl-mesh`.
+//! geometry).
 
 pub mod dual;
 pub mod merge;
 pub mod mincut;
 pub mod vsa;
 
+use super::fl_mesh;
 use super::flatten::{self, cut::Cuts, param};
 use super::flatten::{InputUnit, Unit};
 use super::{bad_param, AlgoError, Control, Outcome};
@@ -63,6 +71,24 @@ fn d_l2() -> f64 {
 }
 fn d_true() -> bool {
     true
+}
+fn d_fl_mesh() -> fl_mesh::Params {
+    fl_mesh::Params {
+        refine: false,
+        ..fl_mesh::Params::default()
+    }
+}
+
+/// What runs on the cut mesh before the final flattening.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Then {
+    /// Nothing: quasi-developable charts, as the paper.
+    #[default]
+    #[serde(rename = "none")]
+    Nothing,
+    /// fl-mesh with every chart boundary fixed: exactly flattenable charts.
+    #[serde(rename = "fl-mesh")]
+    FlMesh,
 }
 
 /// Parameters of `segment`; unknown keys are refused.
@@ -112,6 +138,13 @@ pub struct Params {
     /// Unit the mesh's coordinates are in (`auto` default: guessed from its size).
     #[serde(default)]
     pub input_unit: InputUnit,
+    /// `none` (default) or `fl-mesh`: make every chart exactly flattenable, its boundary
+    /// fixed, before flattening.
+    #[serde(default)]
+    pub then: Then,
+    /// Parameters of that fl-mesh run (fl-mesh's defaults, refinement off).
+    #[serde(default = "d_fl_mesh")]
+    pub fl_mesh: fl_mesh::Params,
 }
 
 impl Default for Params {
@@ -131,6 +164,8 @@ impl Default for Params {
             boundary_angles: param::BoundaryAngles::default(),
             unit: Unit::default(),
             input_unit: InputUnit::default(),
+            then: Then::Nothing,
+            fl_mesh: d_fl_mesh(),
         }
     }
 }
@@ -162,7 +197,19 @@ impl Params {
                 "must be at least 1 (no flattening stretches less) and finite",
             ));
         }
-        Ok(())
+        if self.fl_mesh.refine {
+            return Err(bad_param(
+                "fl_mesh.refine",
+                "must be false: refinement would add vertices and split faces of the cut mesh",
+            ));
+        }
+        self.fl_mesh.check().map_err(|e| match e {
+            AlgoError::InvalidParam { key, message } => AlgoError::InvalidParam {
+                key: format!("fl_mesh.{key}"),
+                message,
+            },
+            other => other,
+        })
     }
 
     /// The flattening merging tests with and the output is made with.
@@ -243,6 +290,13 @@ pub struct Summary {
     pub worst_l2_stretch: f64,
     /// Every final piece is within the bounds and does not overlap.
     pub all_within_bounds: bool,
+    /// Largest edge stretch over the final pieces, percent (flatten's `stretch_max_pct`).
+    pub worst_stretch_max_pct: f64,
+    /// What fl-mesh did on the cut mesh (`then = fl-mesh`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fl_mesh: Option<fl_mesh::Report>,
+    /// Hausdorff distance from the output mesh to the input (0 unless `then = fl-mesh`).
+    pub hausdorff_to_input: super::Distance,
     /// The final flattening, as `flatten` reports it.
     pub flatten: flatten::Summary,
     /// Seconds per stage.
@@ -291,7 +345,14 @@ pub fn run(
     let merged = merge::run(mesh, &dual, &labels, k_tested, &criteria, control)?;
     let t_merge = t0.elapsed().as_secs_f64();
     let face_charts = renumber(&merged.labels);
-    let (cut_mesh, vertex_map) = cut_mesh(mesh, &face_charts, &merged.cut)?;
+    let (mut cut_mesh, vertex_map) = cut_mesh(mesh, &face_charts, &merged.cut)?;
+    let mut fl_report = None;
+    if params.then == Then::FlMesh {
+        let (m, r) = fl_mesh::solve(&cut_mesh, &params.fl_mesh, control)?;
+        cut_mesh = m;
+        fl_report = Some(r);
+    }
+    let hausdorff_to_input = super::Distance::hausdorff(&cut_mesh, mesh);
     let mut flat = flatten::run(&cut_mesh, &criteria.flatten, control)?;
     // Seams from the input, where the charts are still joined: each piece's vertices mapped
     // back to input vertices (face by face, so two copies of one vertex stay apart).
@@ -312,6 +373,7 @@ pub fn run(
     }
     let mut worst_a: f64 = 0.0;
     let mut worst_l2: f64 = 0.0;
+    let mut worst_stretch: f64 = 0.0;
     // Every chart flattened (none skipped) and each within the bounds; flatten's own
     // warnings about distortion under the bounds do not count.
     let mut within = flat.summary.pieces.len() == count(&face_charts);
@@ -329,6 +391,7 @@ pub fn run(
         );
         worst_a = worst_a.max(a);
         worst_l2 = worst_l2.max(l2);
+        worst_stretch = worst_stretch.max(get("stretch_max_pct"));
         within &= a <= params.max_area_distortion
             && l2 <= params.max_l2_stretch
             && (!params.reject_overlap || overlap == 0.0);
@@ -357,6 +420,9 @@ pub fn run(
         worst_area_distortion_pct: worst_a,
         worst_l2_stretch: worst_l2,
         all_within_bounds: within,
+        worst_stretch_max_pct: worst_stretch,
+        fl_mesh: fl_report,
+        hausdorff_to_input,
         flatten: flat.summary,
         stage_seconds: Seconds {
             vsa: t_vsa,
