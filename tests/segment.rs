@@ -565,3 +565,110 @@ fn then_fl_mesh_makes_every_chart_isometric() {
         }
     }
 }
+
+#[test]
+fn pseudo_inverse_solves_and_drops_the_null_space() {
+    // Rank 2: M = 2 e_x e_xᵀ + 3 e_y e_yᵀ rotated; M⁺ r has no component along the null vector.
+    let (c, s) = (0.6f64, 0.8f64);
+    let rot = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]];
+    let d = [2.0, 3.0, 0.0];
+    let mut m = [[0.0; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            for k in 0..3 {
+                m[i][j] += rot[i][k] * d[k] * rot[j][k];
+            }
+        }
+    }
+    // Rotate the axes to a general position too.
+    let r = [1.0, -2.0, 5.0];
+    let x = segment::denoise::pseudo_solve(m, r);
+    // Expected: Σ_k u_k (u_k·r)/d_k over the two non-zero d_k.
+    let mut want = [0.0; 3];
+    for k in 0..2 {
+        let u = [rot[0][k], rot[1][k], rot[2][k]];
+        let ur: f64 = (0..3).map(|i| u[i] * r[i]).sum();
+        for i in 0..3 {
+            want[i] += u[i] * ur / d[k];
+        }
+    }
+    for i in 0..3 {
+        assert!((x[i] - want[i]).abs() < 1e-12, "{x:?} vs {want:?}");
+    }
+}
+
+/// The cube's chart-boundary vertices (one chart per side), pushed off by noise, go back
+/// onto the planes of the sides they lie on; a noise-free cube does not move. (With VSA's
+/// charts the cube may get a chart one face row wide, all of whose vertices are on its
+/// boundary: sliding it along its normal costs nothing, so no noise-free answer is implied.)
+#[test]
+fn denoising_puts_chart_boundaries_back_on_the_box() {
+    let clean = cube(8);
+    let dual = Dual::new(&clean, true);
+    let labels: Vec<u32> = dual
+        .normal
+        .iter()
+        .map(|n| {
+            let axis = (0..3)
+                .max_by(|&a, &b| n[a].abs().total_cmp(&n[b].abs()))
+                .unwrap();
+            (2 * axis + (n[axis] > 0.0) as usize) as u32
+        })
+        .collect();
+    let k = 6;
+    let still = segment::denoise::run(&clean, &labels, k);
+    assert_eq!(still.max_displacement, 0.0);
+    let mut pos = clean.positions().to_vec();
+    let conn = clean.conn();
+    let mut seed = 7u64;
+    let mut noise = || {
+        seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 0.02
+    };
+    let mut moved = Vec::new();
+    for w in 0..pos.len() as u32 {
+        let charts: std::collections::HashSet<u32> = conn
+            .fan_of(w)
+            .iter()
+            .map(|&h| labels[(h / 3) as usize])
+            .collect();
+        if charts.len() > 1 {
+            for x in pos[w as usize].iter_mut() {
+                *x += noise();
+            }
+            moved.push(w);
+        }
+    }
+    let noisy = clean.with_positions(pos).unwrap();
+    // Distance to the intersection of the cube's sides through the clean position.
+    let off = |p: [f64; 3], p0: [f64; 3]| -> f64 {
+        (0..3)
+            .filter(|&c| p0[c] == 0.0 || p0[c] == 1.0)
+            .map(|c| (p[c] - p0[c]).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    };
+    let before = moved
+        .iter()
+        .map(|&w| off(noisy.position(w), clean.position(w)))
+        .fold(0.0, f64::max);
+    let d = segment::denoise::run(&noisy, &labels, k);
+    let after = moved
+        .iter()
+        .map(|&w| off(d.positions[w as usize], clean.position(w)))
+        .fold(0.0, f64::max);
+    assert!(
+        after <= 1e-3 * before,
+        "{before} → {after} ({} sweeps, {} refused, {} charts)",
+        d.sweeps,
+        d.refused,
+        k
+    );
+    for w in 0..noisy.num_vertices() {
+        if !moved.contains(&(w as u32)) {
+            assert_eq!(d.positions[w], noisy.position(w as u32));
+        }
+    }
+}

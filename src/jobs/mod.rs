@@ -162,6 +162,7 @@ impl Kind {
             Kind::Segment => {
                 "vsa_tolerance (5e-4: largest chart L^{2,1} error over the total area), \
                  max_charts (256), lloyd_iterations (50), fuzzy_rings (3; 0 skips the min-cut), \
+                 denoise=true|false (false: the paper's step 3 moves the user's geometry), \
                  max_area_distortion (10 %), max_l2_stretch (2.0), reject_overlap=true|false \
                  (true), retry_rejected=true|false (false), merge=boundary|patch (boundary), \
                  keep_patches=true|false (true: never across the input's seams), \
@@ -324,7 +325,9 @@ impl JobSpec {
                 perturb::run(mesh, input.reference.as_ref(), p, control)?.into_job(Figures::Perturb)
             }
             JobSpec::Develop(p) => develop::run(mesh, p, control)?.into_job(Figures::Develop),
-            JobSpec::Segment(p) => segment::run(mesh, p, control)?.into_job(Figures::Segment),
+            JobSpec::Segment(p) => {
+                segment::run(mesh, p, control)?.into_job(|s| Figures::Segment(Box::new(s)))
+            }
         })
     }
 }
@@ -354,8 +357,8 @@ pub enum Figures {
     Perturb(perturb::Summary),
     /// `develop`.
     Develop(develop::Summary),
-    /// `segment`.
-    Segment(segment::Summary),
+    /// `segment` (boxed: its per-face and per-vertex maps make it the largest).
+    Segment(Box<segment::Summary>),
 }
 
 impl Figures {

@@ -23,9 +23,11 @@
 //! up to the solver tolerance. fl-mesh's refinement is refused there (it would add vertices
 //! and split faces, breaking the maps back to the input).
 //!
-//! Not done here (yet): the optional boundary denoising of step 3 (it moves the user's
-//! geometry).
+//! Step 3, [`denoise::run`], is optional and off by default: it moves the chart-boundary
+//! vertices of the user's mesh (the output mesh, the merging and the patterns then use the
+//! moved positions; `denoise_max_displacement` and `hausdorff_to_input` say by how much).
 
+pub mod denoise;
 pub mod dual;
 pub mod merge;
 pub mod mincut;
@@ -108,6 +110,10 @@ pub struct Params {
     /// Width of the min-cut band in face rings around each boundary (3; 0 skips refinement).
     #[serde(default = "d_rings")]
     pub fuzzy_rings: usize,
+    /// Move the chart-boundary vertices onto the intersections of their charts' planes
+    /// (the paper's step 3; false: it changes the user's geometry).
+    #[serde(default)]
+    pub denoise: bool,
     /// Largest |A(Ω)| of a merged chart, percent (10, the paper's).
     #[serde(default = "d_area")]
     pub max_area_distortion: f64,
@@ -154,6 +160,7 @@ impl Default for Params {
             max_charts: d_max_charts(),
             lloyd_iterations: d_lloyd(),
             fuzzy_rings: d_rings(),
+            denoise: false,
             max_area_distortion: d_area(),
             max_l2_stretch: d_l2(),
             reject_overlap: true,
@@ -274,6 +281,12 @@ pub struct Summary {
     pub refine_island_faces: usize,
     /// Charts split in two because they did not flatten within the bounds on their own.
     pub splits: usize,
+    /// With `denoise`: the chart-boundary vertices (those allowed to move).
+    pub denoise_vertices: usize,
+    /// With `denoise`: the largest distance a vertex moved.
+    pub denoise_max_displacement: f64,
+    /// With `denoise`: Gauss–Seidel sweeps.
+    pub denoise_sweeps: usize,
     /// Candidates tested, in order, with their measures and the decision.
     pub merge_log: Vec<merge::Candidate>,
     /// Flattenings run while merging.
@@ -305,12 +318,13 @@ pub struct Summary {
 
 /// Run `segment` on a mesh.
 pub fn run(
-    mesh: &Mesh,
+    input: &Mesh,
     params: &Params,
     control: &dyn Control,
 ) -> Result<Outcome<Summary>, AlgoError> {
     params.check()?;
     let t0 = Instant::now();
+    let mesh = input;
     if mesh.num_faces() == 0 {
         return Err(AlgoError::Input("the mesh has no faces".into()));
     }
@@ -331,6 +345,18 @@ pub fn run(
         mincut::Refinement::default()
     };
     let refined = count(&labels);
+    let denoised = params.denoise.then(|| denoise::run(mesh, &labels, k));
+    let moved_mesh;
+    let (mesh, dual) = match &denoised {
+        Some(d) => {
+            moved_mesh = input
+                .with_positions(d.positions.clone())
+                .map_err(|e| AlgoError::Input(format!("denoising failed: {e}")))?;
+            let dual = dual::Dual::new(&moved_mesh, params.keep_patches);
+            (&moved_mesh, dual)
+        }
+        None => (input, dual),
+    };
     let t_refine = t0.elapsed().as_secs_f64();
     let criteria = merge::Criteria {
         max_area_distortion: params.max_area_distortion,
@@ -352,7 +378,7 @@ pub fn run(
         cut_mesh = m;
         fl_report = Some(r);
     }
-    let hausdorff_to_input = super::Distance::hausdorff(&cut_mesh, mesh);
+    let hausdorff_to_input = super::Distance::hausdorff(&cut_mesh, input);
     let mut flat = flatten::run(&cut_mesh, &criteria.flatten, control)?;
     // Seams from the input, where the charts are still joined: each piece's vertices mapped
     // back to input vertices (face by face, so two copies of one vertex stay apart).
@@ -412,6 +438,9 @@ pub fn run(
         refine_moved_faces: refinement.pairs.iter().map(|p| p.moved).sum(),
         refine_island_faces: refinement.islands,
         splits,
+        denoise_vertices: denoised.as_ref().map_or(0, |d| d.candidates),
+        denoise_max_displacement: denoised.as_ref().map_or(0.0, |d| d.max_displacement),
+        denoise_sweeps: denoised.as_ref().map_or(0, |d| d.sweeps),
         merge_evaluations: merged.evaluations,
         merge_log: merged.log,
         dangling_edges: merged.dangling.len(),
