@@ -193,10 +193,9 @@ pub fn run(
         if control.cancelled() {
             return Err(AlgoError::Cancelled);
         }
-        // Step 3, a batch at a time: the top entries that are still current.
-        // The batch is the longest run of current entries, in heap order, whose charts are
-        // pairwise disjoint: a commit cannot make a later one stale, and processing them in
-        // order is the sequential loop.
+        // Step 3, a batch at a time: the longest run of current entries, in heap order, whose
+        // charts are pairwise disjoint (a commit cannot make a later one stale, and
+        // processing them in order is the sequential loop).
         let mut top = Vec::new();
         let mut busy: Vec<u32> = Vec::new();
         while top.len() < batch {
