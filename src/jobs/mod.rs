@@ -164,7 +164,7 @@ impl Kind {
                  max_charts (256), lloyd_iterations (50), fuzzy_rings (3; 0 skips the min-cut), \
                  denoise=true|false (false: the paper's step 3 moves the user's geometry), \
                  max_area_distortion (10 %), max_l2_stretch (2.0), reject_overlap=true|false \
-                 (true), retry_rejected=true|false (false), merge=boundary|patch (boundary), \
+                 (true), retry_rejected=true|false (false), merge=patch|boundary (patch), \
                  keep_patches=true|false (true: never across the input's seams), \
                  interior=arap|harmonic (arap), boundary_angles=conformal|surface (conformal), \
                  unit=mm|cm|dm|m|in (mm), input_unit=auto|mm|cm|dm|m|in (auto), \

@@ -21,7 +21,9 @@
 //! there, so every chart boundary is mesh boundary, which fl-mesh never moves: the charts
 //! still sew together, and each converged chart is exactly flattenable, its pattern isometric
 //! up to the solver tolerance. fl-mesh's refinement is refused there (it would add vertices
-//! and split faces, breaking the maps back to the input).
+//! and split faces, breaking the maps back to the input). That final flattening opens holes
+//! that enclose curvature by a real cut (`cuts = auto`, as `flatten` by default): a
+//! developable ring around a sleeve cannot be laid flat with its hole closed.
 //!
 //! Step 3, [`denoise::run`], is optional and off by default: it moves the chart-boundary
 //! vertices of the user's mesh (the output mesh, the merging and the patterns then use the
@@ -43,13 +45,21 @@ use std::collections::HashSet;
 use std::time::Instant;
 
 /// How charts are merged.
+///
+/// The paper prefers `boundary` (Fig. 6b) because it ends with fewer, larger charts; but
+/// the curves it leaves inside a chart are slits, seams of the chart with itself, so they
+/// cost sewing too. Measured on nine shared meshes (t-shirt, dress, jumpsuit, suit, two
+/// shoes, spot, hemisphere, shirt), `patch` always needed less seam length in all,
+/// slits included: 2% to 98% less (dress 2821 against 5814, jumpsuit 1.1 against 55,
+/// shoes01 31 against 44), with more pieces on most (t-shirt 5 against 2, spot 21 against 3)
+/// and 1.3–2.9× the time. Seam length is what sewing costs, so `patch` is the default.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum MergeMode {
-    /// Remove one boundary curve per merge (the paper's choice, Fig. 6b).
-    #[default]
+    /// Remove one boundary curve per merge; the others become slits (the paper's, Fig. 6b).
     Boundary,
-    /// Remove every curve between the two charts (Fig. 6a).
+    /// Remove every curve between the two charts: no slits (Fig. 6a).
+    #[default]
     Patch,
 }
 
@@ -126,7 +136,8 @@ pub struct Params {
     /// Test a refused curve again when one of its charts has grown (false: the paper).
     #[serde(default)]
     pub retry_rejected: bool,
-    /// `boundary` (default: one curve per merge) or `patch`.
+    /// `patch` (default: every curve between the two charts; no slits) or `boundary` (the
+    /// paper's: one curve per merge, the others left as slits).
     #[serde(default)]
     pub merge: MergeMode,
     /// Keep the input's patches: segment within each, never across its seams (true).
@@ -165,7 +176,7 @@ impl Default for Params {
             max_l2_stretch: d_l2(),
             reject_overlap: true,
             retry_rejected: false,
-            merge: MergeMode::Boundary,
+            merge: MergeMode::Patch,
             keep_patches: true,
             interior: param::Interior::default(),
             boundary_angles: param::BoundaryAngles::default(),
@@ -379,7 +390,17 @@ pub fn run(
         fl_report = Some(r);
     }
     let hausdorff_to_input = super::Distance::hausdorff(&cut_mesh, input);
-    let mut flat = flatten::run(&cut_mesh, &criteria.flatten, control)?;
+    // After fl-mesh a chart with a hole is developable but the hole may enclose curvature,
+    // which no flattening can close without stretch: `cuts = auto` opens such holes by a real
+    // cut (a seam of the piece with itself), as `flatten` does by default.
+    let final_flatten = match params.then {
+        Then::Nothing => criteria.flatten.clone(),
+        Then::FlMesh => flatten::Params {
+            cuts: Cuts::Auto,
+            ..criteria.flatten.clone()
+        },
+    };
+    let mut flat = flatten::run(&cut_mesh, &final_flatten, control)?;
     // Seams from the input, where the charts are still joined: each piece's vertices mapped
     // back to input vertices (face by face, so two copies of one vertex stay apart).
     if let Some(patterns) = flat.patterns.as_mut() {
@@ -390,7 +411,16 @@ pub fn run(
             }
         }
         let slits: HashSet<u32> = merged.dangling.iter().copied().collect();
-        patterns.seams = flatten::seams_and_slits(mesh, &mapped, &slits);
+        // flatten's own real cuts (pieces[0] = pieces[1]) are kept; its seams between pieces
+        // cannot exist on the unwelded cut mesh.
+        let mut seams = flatten::seams_and_slits(mesh, &mapped, &slits);
+        seams.extend(
+            patterns
+                .seams
+                .drain(..)
+                .filter(|s| s.pieces[0] == s.pieces[1]),
+        );
+        patterns.seams = seams;
         flat.summary.seams = patterns
             .seams
             .iter()
