@@ -184,22 +184,30 @@ fn dinic_max_flow_equals_the_brute_force_min_cut() {
     };
     for _case in 0..200 {
         let n = 2 + (rnd() * 8.0) as usize;
+        // Arcs one way, both ways (as the band's dual edges) and uncapacitated from the
+        // source (as the band's ties to a chart).
         let mut arcs = Vec::new();
+        let mut g = mincut::FlowGraph::new(n);
+        let (s, t) = (0, n - 1);
         for u in 0..n {
-            for v in 0..n {
-                if u != v && rnd() < 0.4 {
-                    arcs.push((
-                        u,
-                        v,
-                        (rnd() * 10.0).floor() + if rnd() < 0.2 { 0.5 } else { 0.0 },
-                    ));
+            for v in u + 1..n {
+                let r = rnd();
+                let c = (rnd() * 10.0).floor() + if rnd() < 0.2 { 0.5 } else { 0.0 };
+                if r < 0.2 {
+                    arcs.push((u, v, c));
+                    g.add(u, v, c, 0.0);
+                } else if r < 0.4 {
+                    arcs.push((v, u, c));
+                    g.add(v, u, c, 0.0);
+                } else if r < 0.6 {
+                    arcs.push((u, v, c));
+                    arcs.push((v, u, c));
+                    g.add(u, v, c, c);
+                } else if r < 0.7 && u == s && v != t {
+                    arcs.push((u, v, f64::INFINITY));
+                    g.add(u, v, f64::INFINITY, 0.0);
                 }
             }
-        }
-        let (s, t) = (0, n - 1);
-        let mut g = mincut::FlowGraph::new(n);
-        for &(u, v, c) in &arcs {
-            g.add(u, v, c, 0.0);
         }
         let flow = g.max_flow(s, t);
         let mut best = f64::INFINITY;
@@ -389,6 +397,17 @@ fn check_output(name: &str, mesh: &Mesh, params: &Params) -> segment::Summary {
                 let [a, b] = e.map(|w| cut.position(p.vertex_ids[w as usize]));
                 *len +=
                     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt();
+            }
+        }
+        // A slit's sides are its two flaps, each a path: consecutive edges meet.
+        if seam.pieces[0] == seam.pieces[1] {
+            for side in &seam.edges {
+                for w in side.windows(2) {
+                    assert_eq!(
+                        w[0][1], w[1][0],
+                        "{name}: slit side is not a path: {side:?}"
+                    );
+                }
             }
         }
         for l in side_len {
@@ -586,9 +605,20 @@ fn then_fl_mesh_makes_every_chart_isometric() {
 
 #[test]
 fn pseudo_inverse_solves_and_drops_the_null_space() {
-    // Rank 2: M = 2 e_x e_xᵀ + 3 e_y e_yᵀ rotated; M⁺ r has no component along the null vector.
+    // Rank 2: M = R diag(2, 3, 0) Rᵀ with R a rotation about a general axis; M⁺ r has no
+    // component along the null vector R e_z.
     let (c, s) = (0.6f64, 0.8f64);
-    let rot = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]];
+    let rz = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]];
+    let (c2, s2) = (0.28f64, 0.96f64);
+    let rx = [[1.0, 0.0, 0.0], [0.0, c2, -s2], [0.0, s2, c2]];
+    let mut rot = [[0.0; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            for k in 0..3 {
+                rot[i][j] += rx[i][k] * rz[k][j];
+            }
+        }
+    }
     let d = [2.0, 3.0, 0.0];
     let mut m = [[0.0; 3]; 3];
     for i in 0..3 {
@@ -598,7 +628,6 @@ fn pseudo_inverse_solves_and_drops_the_null_space() {
             }
         }
     }
-    // Rotate the axes to a general position too.
     let r = [1.0, -2.0, 5.0];
     let x = segment::denoise::pseudo_solve(m, r);
     // Expected: Σ_k u_k (u_k·r)/d_k over the two non-zero d_k.

@@ -177,8 +177,9 @@ pub fn segments_intersect(a: [f64; 2], b: [f64; 2], c: [f64; 2], d: [f64; 2]) ->
         || (d4 == 0 && on_segment(c, d, b))
 }
 
-/// Number of intersecting pairs among boundary segments (segments sharing an endpoint, or
-/// endpoints that are copies of one 3D vertex, are not compared). Sweep by x.
+/// Number of intersecting pairs among boundary segments. Segments sharing an endpoint are not
+/// compared; segments with endpoints that are copies of one 3D point (`vertex_ids` equal)
+/// count only when they properly cross. Sweep by x.
 pub fn boundary_intersections(uv: &[[f64; 2]], loops: &[Vec<u32>], vertex_ids: &[u32]) -> usize {
     let mut segs: Vec<(f64, f64, u32, u32)> = Vec::new();
     for lp in loops {
@@ -197,18 +198,25 @@ pub fn boundary_intersections(uv: &[[f64; 2]], loops: &[Vec<u32>], vertex_ids: &
             if xmin2 > xmax {
                 break;
             }
-            let gid = |v: u32| vertex_ids[v as usize];
-            if [k, l]
-                .iter()
-                .any(|&v| v == i || v == j || gid(v) == gid(i) || gid(v) == gid(j))
-            {
+            if [k, l].iter().any(|&v| v == i || v == j) {
                 continue;
             }
             let (c, d) = (uv[k as usize], uv[l as usize]);
             if a[1].max(b[1]) < c[1].min(d[1]) || c[1].max(d[1]) < a[1].min(b[1]) {
                 continue;
             }
-            if segments_intersect(a, b, c, d) {
+            // Segments ending at copies of one 3D point may touch there (and lie on each
+            // other along a slit); only a proper crossing counts for them.
+            let gid = |v: u32| vertex_ids[v as usize];
+            let copies = [k, l].iter().any(|&v| gid(v) == gid(i) || gid(v) == gid(j));
+            let hit = if copies {
+                let (d1, d2) = (orient2d(a, b, c), orient2d(a, b, d));
+                let (d3, d4) = (orient2d(c, d, a), orient2d(c, d, b));
+                d1 * d2 < 0 && d3 * d4 < 0
+            } else {
+                segments_intersect(a, b, c, d)
+            };
+            if hit {
                 count += 1;
             }
         }

@@ -568,8 +568,9 @@ pub fn seams(mesh: &Mesh, pieces: &[Piece]) -> Vec<Seam> {
 }
 
 /// [`seams`], plus the mesh edges in `slits` whose two faces lie in one piece that is cut
-/// there (segmentation's dangling cuts), each chain a seam of that piece with itself, side 0
-/// the first face of each edge.
+/// there (segmentation's dangling cuts), each simple path of them a seam of that piece with
+/// itself: side 0 the faces on its left (where an edge runs in walking order), as
+/// [`cut_seams`].
 pub fn seams_and_slits(mesh: &Mesh, pieces: &[Piece], slits: &HashSet<u32>) -> Vec<Seam> {
     // global face → (piece, local triangle)
     let mut where_: Vec<(u32, u32)> = vec![(u32::MAX, 0); mesh.num_faces()];
@@ -633,7 +634,20 @@ pub fn seams_and_slits(mesh: &Mesh, pieces: &[Piece], slits: &HashSet<u32>) -> V
                 None => chains.push((r, vec![e])),
             }
         }
-        for (_, ch) in chains {
+        // A slit's sides are its left and right: it is split into simple paths, each edge
+        // directed along its path.
+        let runs: Vec<(Vec<usize>, Vec<[u32; 2]>)> = chains
+            .into_iter()
+            .flat_map(|(_, ch)| {
+                if k.0 == k.1 {
+                    simple_paths(&ch, conn.edges())
+                } else {
+                    let dir = ch.iter().map(|&e| conn.edges()[e]).collect();
+                    vec![(ch, dir)]
+                }
+            })
+            .collect();
+        for (ch, dir) in runs {
             let mut s = Seam {
                 patches: [
                     pieces[k.0 as usize].patch.clone(),
@@ -642,13 +656,15 @@ pub fn seams_and_slits(mesh: &Mesh, pieces: &[Piece], slits: &HashSet<u32>) -> V
                 pieces: [k.0 as usize, k.1 as usize],
                 ..Seam::default()
             };
-            for &e in &ch {
-                let [a, b] = conn.edges()[e];
+            for (&e, &[a, b]) in ch.iter().zip(&dir) {
                 s.length_3d += cut::dist(mesh.position(a), mesh.position(b));
-                for (j, &f) in conn.edge_faces()[e].iter().enumerate() {
+                for &f in &conn.edge_faces()[e] {
                     let pi = where_[f as usize].0;
                     let side = if k.0 == k.1 {
-                        j
+                        // side 0: the face where the edge runs a → b
+                        let t = mesh.triangles()[f as usize];
+                        let runs = (0..3).any(|i| t[i] == a && t[(i + 1) % 3] == b);
+                        usize::from(!runs)
                     } else if pi == k.0 {
                         0
                     } else {
@@ -667,6 +683,45 @@ pub fn seams_and_slits(mesh: &Mesh, pieces: &[Piece], slits: &HashSet<u32>) -> V
                 }
             }
             out.push(s);
+        }
+    }
+    out
+}
+
+/// A connected set of edges split into simple paths (broken where the degree is not 2) and
+/// loops, each as its edges in walking order, directed along the walk. Deterministic: walks
+/// start from the lowest vertex, and take the lowest unused edge.
+fn simple_paths(chain: &[usize], edges: &[[u32; 2]]) -> Vec<(Vec<usize>, Vec<[u32; 2]>)> {
+    let mut at: HashMap<u32, Vec<usize>> = HashMap::new();
+    for &e in chain {
+        for v in edges[e] {
+            at.entry(v).or_default().push(e);
+        }
+    }
+    let mut starts: Vec<u32> = at.keys().copied().collect();
+    starts.sort_unstable_by_key(|v| (at[v].len() == 2, *v));
+    let mut used: HashSet<usize> = HashSet::new();
+    let mut out = Vec::new();
+    for s0 in starts {
+        while let Some(&e0) = at[&s0].iter().filter(|e| !used.contains(e)).min() {
+            let (mut order, mut dirs) = (Vec::new(), Vec::new());
+            let (mut v, mut e) = (s0, e0);
+            loop {
+                used.insert(e);
+                let [p, q] = edges[e];
+                let w = if p == v { q } else { p };
+                order.push(e);
+                dirs.push([v, w]);
+                v = w;
+                if at[&v].len() != 2 {
+                    break;
+                }
+                match at[&v].iter().find(|x| !used.contains(x)) {
+                    Some(&n) => e = n,
+                    None => break,
+                }
+            }
+            out.push((order, dirs));
         }
     }
     out

@@ -218,16 +218,17 @@ pub fn run(
         if top.is_empty() {
             break;
         }
-        let todo: Vec<(u32, [u32; 2], [u32; 2])> = top
+        // With patch-based merging every curve between two charts is the same candidate.
+        let key = |e: &Entry| -> (u32, [u32; 2]) {
+            let c = if criteria.patch_based { NONE } else { e.curve };
+            (c, e.versions)
+        };
+        // (curve, its charts, cache key)
+        type Todo = (u32, [u32; 2], (u32, [u32; 2]));
+        let todo: Vec<Todo> = top
             .iter()
-            .filter(|e| !cache.contains_key(&(e.curve, e.versions)))
-            .map(|e| {
-                (
-                    e.curve,
-                    pair(&labels, &curves[e.curve as usize]),
-                    e.versions,
-                )
-            })
+            .filter(|e| !cache.contains_key(&key(e)))
+            .map(|e| (e.curve, pair(&labels, &curves[e.curve as usize]), key(e)))
             .collect();
         let tested: Vec<Result<Test, AlgoError>> = todo
             .par_iter()
@@ -236,8 +237,8 @@ pub fn run(
                 test(mesh, &members, [a, b], &cut, &removed, criteria, control)
             })
             .collect();
-        for (t, (ci, _, v)) in tested.into_iter().zip(&todo) {
-            cache.insert((*ci, *v), t?);
+        for (t, (_, _, k)) in tested.into_iter().zip(todo) {
+            cache.insert(k, t?);
             out.evaluations += 1;
         }
         control.progress(&Progress {
@@ -249,7 +250,7 @@ pub fn run(
         for e in rest.by_ref() {
             let ci = e.curve;
             let [a, b] = pair(&labels, &curves[ci as usize]);
-            let t = &cache[&(ci, e.versions)];
+            let t = &cache[&key(&e)];
             let accepted = t.refusal.is_none();
             out.log.push(Candidate {
                 curve: ci,
@@ -409,6 +410,35 @@ pub fn split_until_within(
     Ok((members.len(), splits))
 }
 
+/// Slit edges (`slits`, both faces in one chart) that splitting vertices cannot open: both
+/// ends are inside the chart (a closed fan of its faces) with no other slit edge. Such a
+/// one-edge slit is zipped, in the test and in the output alike: no mesh can hold it open.
+pub fn isolated_slits(mesh: &Mesh, chart_of: impl Fn(usize) -> u32, slits: &[u32]) -> HashSet<u32> {
+    let conn = mesh.conn();
+    let mut degree: HashMap<u32, u32> = HashMap::new();
+    for &e in slits {
+        for v in conn.edges()[e as usize] {
+            *degree.entry(v).or_default() += 1;
+        }
+    }
+    let tip = |v: u32, c: u32| {
+        degree[&v] == 1
+            && conn.kind(v) != VertexKind::Boundary
+            && conn
+                .fan_of(v)
+                .iter()
+                .all(|&h| chart_of((h / 3) as usize) == c)
+    };
+    slits
+        .iter()
+        .copied()
+        .filter(|&e| {
+            let c = chart_of(conn.edge_faces()[e as usize][0] as usize);
+            conn.edges()[e as usize].iter().all(|&v| tip(v, c))
+        })
+        .collect()
+}
+
 /// The edges a merge along curve `ci` removes: its own, or with `patch_based` every curve's
 /// between the same two charts.
 fn removed_edges(
@@ -466,16 +496,32 @@ fn evaluate(
     };
     let removed: HashSet<u32> = removed.iter().copied().collect();
     let conn = mesh.conn();
-    let mut cuts = HashSet::new();
+    let inside: HashSet<u32> = faces.iter().copied().collect();
+    let mut slits = Vec::new();
     for &f in &faces {
         for i in 0..3 {
             let e = conn.edge_of(3 * f + i);
-            if cut[e as usize] && !removed.contains(&e) {
-                let [p, q] = conn.edges()[e as usize];
-                cuts.insert((p.min(q), p.max(q)));
+            let [g, h] = conn.edge_faces()[e as usize];
+            if cut[e as usize]
+                && !removed.contains(&e)
+                && h != NONE
+                && inside.contains(&g)
+                && inside.contains(&h)
+                && f == g
+            {
+                slits.push(e);
             }
         }
     }
+    let zipped = isolated_slits(mesh, |f| u32::from(!inside.contains(&(f as u32))), &slits);
+    let cuts: HashSet<(u32, u32)> = slits
+        .iter()
+        .filter(|e| !zipped.contains(e))
+        .map(|&e| {
+            let [p, q] = conn.edges()[e as usize];
+            (p.min(q), p.max(q))
+        })
+        .collect();
     let piece = match Piece3::build_cut(
         format!("chart of face {}", faces[0]),
         faces.clone(),

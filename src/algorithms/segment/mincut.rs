@@ -342,7 +342,11 @@ fn cut_pair(
 }
 
 /// Give every island of a chart (a connected piece other than its largest) to the neighbouring
-/// chart it shares the longest boundary with; returns the faces moved.
+/// chart it shares the longest boundary with, counting only the kept (largest) pieces of
+/// neighbours: two islands next to each other would otherwise swap charts for ever. An island
+/// touching no kept piece waits for a round in which a neighbour has joined one; each round
+/// moves at least one island into a kept piece, so at most as many rounds as islands.
+/// Returns the faces moved.
 pub fn reconnect(dual: &Dual, labels: &mut [u32], k: usize) -> usize {
     let mut moved = 0;
     loop {
@@ -374,7 +378,7 @@ pub fn reconnect(dual: &Dual, labels: &mut [u32], k: usize) -> usize {
         for &c in &islands {
             is_island[c] = true;
         }
-        // Shared boundary length of each island with each other chart.
+        // Shared boundary length of each island with each other chart's kept piece.
         let mut shared: BTreeMap<(u32, u32), f64> = BTreeMap::new();
         for f in 0..dual.len() {
             let c = comp[f] as usize;
@@ -382,7 +386,7 @@ pub fn reconnect(dual: &Dual, labels: &mut [u32], k: usize) -> usize {
                 continue;
             }
             for (g, e) in dual.arcs(f) {
-                if labels[g] != labels[f] {
+                if labels[g] != labels[f] && !is_island[comp[g] as usize] {
                     *shared.entry((c as u32, labels[g])).or_default() += dual.edge_length[e];
                 }
             }

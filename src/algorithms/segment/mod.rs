@@ -203,16 +203,17 @@ impl Params {
         if self.fuzzy_rings > 50 {
             return Err(bad_param("fuzzy_rings", "must be in 0..=50"));
         }
-        if !(self.max_area_distortion >= 0.0 && self.max_area_distortion <= 100.0) {
+        // Zero slack would refuse every chart that is not exactly flat, down to single faces.
+        if !(self.max_area_distortion > 0.0 && self.max_area_distortion <= 100.0) {
             return Err(bad_param(
                 "max_area_distortion",
-                "must be in [0, 100] (percent)",
+                "must be in (0, 100] (percent)",
             ));
         }
-        if !(self.max_l2_stretch >= 1.0 && self.max_l2_stretch.is_finite()) {
+        if !(self.max_l2_stretch > 1.0 && self.max_l2_stretch.is_finite()) {
             return Err(bad_param(
                 "max_l2_stretch",
-                "must be at least 1 (no flattening stretches less) and finite",
+                "must be above 1 (no flattening stretches less) and finite",
             ));
         }
         if self.fl_mesh.refine {
@@ -319,7 +320,8 @@ pub struct Summary {
     /// What fl-mesh did on the cut mesh (`then = fl-mesh`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fl_mesh: Option<fl_mesh::Report>,
-    /// Hausdorff distance from the output mesh to the input (0 unless `then = fl-mesh`).
+    /// Hausdorff distance from the output mesh to the input (0 unless `then = fl-mesh` or
+    /// `denoise`).
     pub hausdorff_to_input: super::Distance,
     /// The final flattening, as `flatten` reports it.
     pub flatten: flatten::Summary,
@@ -382,7 +384,21 @@ pub fn run(
     let merged = merge::run(mesh, &dual, &labels, k_tested, &criteria, control)?;
     let t_merge = t0.elapsed().as_secs_f64();
     let face_charts = renumber(&merged.labels);
-    let (mut cut_mesh, vertex_map) = cut_mesh(mesh, &face_charts, &merged.cut)?;
+    // One-edge slits no mesh can hold open were zipped when tested; zip them here too.
+    let zipped = merge::isolated_slits(mesh, |f| face_charts[f], &merged.dangling);
+    let dangling: Vec<u32> = merged
+        .dangling
+        .iter()
+        .copied()
+        .filter(|e| !zipped.contains(e))
+        .collect();
+    let cut_edges: Vec<u32> = merged
+        .cut
+        .iter()
+        .copied()
+        .filter(|e| !zipped.contains(e))
+        .collect();
+    let (mut cut_mesh, vertex_map) = cut_mesh(mesh, &face_charts, &cut_edges)?;
     let mut fl_report = None;
     if params.then == Then::FlMesh {
         let (m, r) = fl_mesh::solve(&cut_mesh, &params.fl_mesh, control)?;
@@ -410,7 +426,7 @@ pub fn run(
                 *v = vertex_map[*v as usize];
             }
         }
-        let slits: HashSet<u32> = merged.dangling.iter().copied().collect();
+        let slits: HashSet<u32> = dangling.iter().copied().collect();
         // flatten's own real cuts (pieces[0] = pieces[1]) are kept; its seams between pieces
         // cannot exist on the unwelded cut mesh.
         let mut seams = flatten::seams_and_slits(mesh, &mapped, &slits);
@@ -473,7 +489,7 @@ pub fn run(
         denoise_sweeps: denoised.as_ref().map_or(0, |d| d.sweeps),
         merge_evaluations: merged.evaluations,
         merge_log: merged.log,
-        dangling_edges: merged.dangling.len(),
+        dangling_edges: dangling.len(),
         face_charts,
         vertex_map,
         worst_area_distortion_pct: worst_a,
