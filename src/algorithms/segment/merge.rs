@@ -21,7 +21,10 @@
 //! t-shirt, spot, shoe and hemisphere, so it is an option, not the default (paper-notes D.3
 //! proposed it on by default for local maximality).
 //!
-//! `merge = patch` is Fig. 6(a): a merge removes every curve between the two charts.
+//! `merge = patch` is Fig. 6(a): a merge removes every curve between the two charts, so no
+//! slit is ever left. It is the default (see [`super::MergeMode`] for the measurements);
+//! its candidates are cached per chart pair, since every curve between two charts is then
+//! the same candidate.
 //!
 //! Candidates are tested in parallel in batches: the longest run of the heap's top entries
 //! whose charts are pairwise disjoint, committed in heap order; a commit ends the batch (the

@@ -6,9 +6,10 @@
 //! [`merge::split_until_within`] (not in the paper: a chart that does not flatten within the
 //! bounds on its own is split in two until each does, so that every output chart has been
 //! tested), [`merge::run`] (greedy boundary-curve merging, accepted only when the merged chart
-//! flattens within the bounds), then the charts become the patches of a cut mesh whose
-//! dangling cuts are split, and that mesh is flattened by [`flatten::run`]: the patterns,
-//! seams and measures are exactly what `flatten` gives for it.
+//! flattens within the bounds), then the charts become the patches of a cut mesh (charts not
+//! welded to each other, slits split), and that mesh is flattened by [`flatten::run`]: the
+//! patterns and measures are exactly what `flatten` gives for it; the seams between charts
+//! and the slits are found on the input, where the charts are still joined.
 //!
 //! Merging and the final flattening use the same flattening (`interior`, `boundary_angles`;
 //! holes closed by the paper's virtual cut), so every accepted chart's pattern is the one
