@@ -141,16 +141,13 @@ impl Work {
         debug_assert_eq!(row, self.r);
     }
 
-    /// ΛΛᵀ as a dense matrix.
+    /// ΛΛᵀ as a dense matrix, by faer's blocked product: with the coincidence rows of a
+    /// virtual cut r reaches hundreds, and entry-by-entry dot products were 30 % of a
+    /// segmentation's time on a 34k-face scan.
     fn gram(&self) -> Mat<f64> {
         let (n, r) = (self.n, self.r);
-        Mat::from_fn(r, r, |i, j| {
-            let (a, b) = (
-                &self.lam_mat[i * n..(i + 1) * n],
-                &self.lam_mat[j * n..(j + 1) * n],
-            );
-            a.iter().zip(b).map(|(x, y)| x * y).sum()
-        })
+        let lam = faer::MatRef::from_row_major_slice(&self.lam_mat[..r * n], r, n);
+        lam * lam.transpose()
     }
 }
 

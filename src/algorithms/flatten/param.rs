@@ -380,8 +380,10 @@ fn arap_steps(
                 let r = rotate(rot[k], dx);
                 energy += wt[i] * ((du[0] - r[0]).powi(2) + (du[1] - r[1]).powi(2));
             }
-            let th = (s[2] - s[1]).atan2(s[0] + s[3]);
-            rot[k] = [th.cos(), th.sin()];
+            // The rotation by atan2(y, x) is (x, y)/|(x, y)|: no trigonometry needed.
+            let (c, sn) = (s[0] + s[3], s[2] - s[1]);
+            let n = c.hypot(sn);
+            rot[k] = if n > 0.0 { [c / n, sn / n] } else { [1.0, 0.0] };
         }
         if it > 0 && (energy.is_nan() || energy >= last * (1.0 - 1e-4)) {
             break;
