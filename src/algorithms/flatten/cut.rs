@@ -356,9 +356,9 @@ pub const CLOSED_CUT_BUDGET: f64 = 8.0;
 /// [`CLOSED_CUT_BUDGET`]·√area or there are fewer than two curved vertices.
 pub fn plan_cuts(p: &Piece3, mode: Cuts, tolerance: f64) -> Result<CutPlan, String> {
     let sums = p.angle_sums();
-    let adj = interior_adjacency(p);
     let mut plan = CutPlan::default();
     if p.loops.is_empty() {
+        let adj = interior_adjacency(p);
         let mut curved: Vec<u32> = (0..p.pos.len() as u32)
             .filter(|&v| (2.0 * PI - sums[v as usize]).abs() > tolerance)
             .collect();
@@ -414,6 +414,8 @@ pub fn plan_cuts(p: &Piece3, mode: Cuts, tolerance: f64) -> Result<CutPlan, Stri
     if to_cut.is_empty() {
         return Ok(plan);
     }
+    // Built only when a path is needed: most pieces have none (segmentation tests hundreds).
+    let adj = interior_adjacency(p);
     let mut blocked = vec![false; p.pos.len()];
     for (lp, &h) in inner.iter().zip(&plan.holes) {
         if h {
