@@ -7,8 +7,8 @@
 //! Before timing, one checked run per mesh prints the chart counts per stage, the worst
 //! chart, the flattenings run, the seconds per stage and the run's peak heap.
 //!
-//! Measured (2-core VM, defaults, medians of 10): bff_face 12.4 s (VSA 2.0, merging 10.2 s
-//! over 343 flattenings, 162 → 15 charts), hemisphere 64k 5.7 s (64 → 8 charts).
+//! Measured (2-core VM, defaults, medians of 10): bff_face 11.0 s (VSA 2.0, merging 9.0 s
+//! over 343 flattenings, 162 → 15 charts), hemisphere 64k 4.7 s (64 → 8 charts).
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use flatmesh::algorithms::develop::loop_subdivide;
