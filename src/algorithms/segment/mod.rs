@@ -418,57 +418,17 @@ pub fn run(
         },
     };
     let mut flat = flatten::run(&cut_mesh, &final_flatten, control)?;
-    // Seams from the input, where the charts are still joined: each piece's vertices mapped
-    // back to input vertices (face by face, so two copies of one vertex stay apart).
     if let Some(patterns) = flat.patterns.as_mut() {
-        let mut mapped = patterns.pieces.clone();
-        for p in &mut mapped {
-            for v in &mut p.vertex_ids {
-                *v = vertex_map[*v as usize];
-            }
-        }
-        let slits: HashSet<u32> = dangling.iter().copied().collect();
-        // flatten's own real cuts (pieces[0] = pieces[1]) are kept; its seams between pieces
-        // cannot exist on the unwelded cut mesh.
-        let mut seams = flatten::seams_and_slits(mesh, &mapped, &slits);
-        seams.extend(
-            patterns
-                .seams
-                .drain(..)
-                .filter(|s| s.pieces[0] == s.pieces[1]),
-        );
-        patterns.seams = seams;
+        seams_on_input(mesh, patterns, &vertex_map, &dangling);
         flat.summary.seams = patterns
             .seams
             .iter()
             .map(flatten::SeamSummary::from)
             .collect();
     }
-    let mut worst_a: f64 = 0.0;
-    let mut worst_l2: f64 = 0.0;
-    let mut worst_stretch: f64 = 0.0;
-    // Every chart flattened (none skipped) and each within the bounds; flatten's own
-    // warnings about distortion under the bounds do not count.
-    let mut within = flat.summary.pieces.len() == count(&face_charts);
-    for p in &flat.summary.pieces {
-        let get = |k: &str| {
-            p.measures
-                .get(k)
-                .and_then(|v| v.as_f64())
-                .unwrap_or(f64::MAX)
-        };
-        let (a, l2, overlap) = (
-            get("area_distortion_pct").abs(),
-            get("l2_stretch"),
-            get("overlap"),
-        );
-        worst_a = worst_a.max(a);
-        worst_l2 = worst_l2.max(l2);
-        worst_stretch = worst_stretch.max(get("stretch_max_pct"));
-        within &= a <= params.max_area_distortion
-            && l2 <= params.max_l2_stretch
-            && (!params.reject_overlap || overlap == 0.0);
-    }
+    // Every chart flattened (none skipped) and each within the bounds.
+    let worst = Worst::of(&flat.summary.pieces, params);
+    let within = worst.within && flat.summary.pieces.len() == count(&face_charts);
     let t_end = t0.elapsed().as_secs_f64();
     let summary = Summary {
         charts: Counts {
@@ -493,10 +453,10 @@ pub fn run(
         dangling_edges: dangling.len(),
         face_charts,
         vertex_map,
-        worst_area_distortion_pct: worst_a,
-        worst_l2_stretch: worst_l2,
+        worst_area_distortion_pct: worst.area,
+        worst_l2_stretch: worst.l2,
         all_within_bounds: within,
-        worst_stretch_max_pct: worst_stretch,
+        worst_stretch_max_pct: worst.stretch,
         fl_mesh: fl_report,
         hausdorff_to_input,
         flatten: flat.summary,
@@ -514,6 +474,73 @@ pub fn run(
         summary,
         levels: Vec::new(),
     })
+}
+
+/// The seams of the patterns, found on the input where the charts are still joined: each
+/// piece's vertices mapped back to input vertices (face by face, so two copies of one vertex
+/// stay apart), with the slits `dangling`; flatten's own real cuts (a seam of a piece with
+/// itself) are kept, its seams between pieces cannot exist on the unwelded cut mesh.
+fn seams_on_input(
+    mesh: &Mesh,
+    patterns: &mut crate::pattern::Patterns,
+    vertex_map: &[u32],
+    dangling: &[u32],
+) {
+    let mut mapped = patterns.pieces.clone();
+    for p in &mut mapped {
+        for v in &mut p.vertex_ids {
+            *v = vertex_map[*v as usize];
+        }
+    }
+    let slits: HashSet<u32> = dangling.iter().copied().collect();
+    let mut seams = flatten::seams_and_slits(mesh, &mapped, &slits);
+    seams.extend(
+        patterns
+            .seams
+            .drain(..)
+            .filter(|s| s.pieces[0] == s.pieces[1]),
+    );
+    patterns.seams = seams;
+}
+
+/// The worst measures over the final pieces, and whether each is within the bounds
+/// (flatten's own warnings about distortion under the bounds do not count).
+struct Worst {
+    area: f64,
+    l2: f64,
+    stretch: f64,
+    within: bool,
+}
+
+impl Worst {
+    fn of(pieces: &[flatten::PieceSummary], params: &Params) -> Worst {
+        let mut w = Worst {
+            area: 0.0,
+            l2: 0.0,
+            stretch: 0.0,
+            within: true,
+        };
+        for p in pieces {
+            let get = |k: &str| {
+                p.measures
+                    .get(k)
+                    .and_then(|v| v.as_f64())
+                    .unwrap_or(f64::MAX)
+            };
+            let (a, l2, overlap) = (
+                get("area_distortion_pct").abs(),
+                get("l2_stretch"),
+                get("overlap"),
+            );
+            w.area = w.area.max(a);
+            w.l2 = w.l2.max(l2);
+            w.stretch = w.stretch.max(get("stretch_max_pct"));
+            w.within &= a <= params.max_area_distortion
+                && l2 <= params.max_l2_stretch
+                && (!params.reject_overlap || overlap == 0.0);
+        }
+        w
+    }
 }
 
 /// Number of distinct labels.
