@@ -19,7 +19,7 @@
 //! Only chart-boundary vertices move, so this changes the user's geometry: off by default.
 
 use crate::geometry;
-use crate::mesh::Mesh;
+use crate::mesh::{cross, sub, Mesh};
 
 /// What denoising did.
 #[derive(Debug, Clone)]
@@ -146,18 +146,6 @@ fn keeps_faces(mesh: &Mesh, pos: &[[f64; 3]], v: u32, q: [f64; 3]) -> bool {
         let n0 = cross(sub(b0, a0), sub(c0, a0));
         n[0] * n0[0] + n[1] * n0[1] + n[2] * n0[2] > 0.0
     })
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
 }
 
 /// M⁺ r for a symmetric positive semi-definite 3×3 M, eigenvalues below 1e-2·trace M

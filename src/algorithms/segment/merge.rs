@@ -152,18 +152,8 @@ pub fn run(
     criteria: &Criteria,
     control: &dyn Control,
 ) -> Result<Merged, AlgoError> {
-    let conn = mesh.conn();
     let mut labels = labels.to_vec();
-    // Every edge between two faces of different charts (or patches, or across the free
-    // boundary) is a cut until a merge removes it.
-    let mut cut = vec![true; conn.edges().len()];
-    for f in 0..dual.len() {
-        for (g, e) in dual.arcs(f) {
-            if labels[f] == labels[g] {
-                cut[e] = false;
-            }
-        }
-    }
+    let mut cut = cut_edges(mesh, dual, &labels);
     let mut curves = find_curves(mesh, dual, &labels);
     let mut area = vec![0.0; k];
     for (f, &l) in labels.iter().enumerate() {
@@ -188,10 +178,7 @@ pub fn run(
     let mut out = Merged::default();
     let mut cache: HashMap<(u32, [u32; 2]), Test> = HashMap::new();
     let batch = 2 * rayon::current_num_threads().max(1);
-    let mut members: Vec<Vec<u32>> = vec![Vec::new(); k];
-    for (f, &l) in labels.iter().enumerate() {
-        members[l as usize].push(f as u32);
-    }
+    let mut members = members_of(&labels, k);
     loop {
         if control.cancelled() {
             return Err(AlgoError::Cancelled);
@@ -330,6 +317,29 @@ pub fn run(
     Ok(out)
 }
 
+/// Whether each mesh edge is cut: every edge except those between two faces of one chart
+/// (edges between patches, with `keep_patches`, and on the free boundary are always cut).
+fn cut_edges(mesh: &Mesh, dual: &Dual, labels: &[u32]) -> Vec<bool> {
+    let mut cut = vec![true; mesh.conn().edges().len()];
+    for f in 0..dual.len() {
+        for (g, e) in dual.arcs(f) {
+            if labels[f] == labels[g] {
+                cut[e] = false;
+            }
+        }
+    }
+    cut
+}
+
+/// The faces of each chart 0..k, ascending.
+fn members_of(labels: &[u32], k: usize) -> Vec<Vec<u32>> {
+    let mut members = vec![Vec::new(); k];
+    for (f, &l) in labels.iter().enumerate() {
+        members[l as usize].push(f as u32);
+    }
+    members
+}
+
 /// Split every chart that does not pass the test on its own (VSA charts are only nearly
 /// planar: a ring round a limb, or a chart VSA left over its tolerance at `max_charts`, may
 /// not flatten within the bounds), in two by [`vsa::split`], until all pass. Merging tests
@@ -343,24 +353,10 @@ pub fn split_until_within(
     criteria: &Criteria,
     control: &dyn Control,
 ) -> Result<(usize, usize), AlgoError> {
-    let cut: Vec<bool> = {
-        let mut c = vec![true; mesh.conn().edges().len()];
-        for f in 0..dual.len() {
-            for (g, e) in dual.arcs(f) {
-                if labels[f] == labels[g] {
-                    c[e] = false;
-                }
-            }
-        }
-        c
-    };
-    let mut members: Vec<Vec<u32>> = vec![Vec::new(); k];
-    for (f, &l) in labels.iter().enumerate() {
-        members[l as usize].push(f as u32);
-    }
+    let mut cut = cut_edges(mesh, dual, labels);
+    let mut members = members_of(labels, k);
     let mut todo: Vec<u32> = (0..k as u32).collect();
     let mut splits = 0;
-    let mut cut = cut;
     while !todo.is_empty() {
         if control.cancelled() {
             return Err(AlgoError::Cancelled);

@@ -387,18 +387,14 @@ pub fn run(
     let face_charts = renumber(&merged.labels);
     // One-edge slits no mesh can hold open were zipped when tested; zip them here too.
     let zipped = merge::isolated_slits(mesh, |f| face_charts[f], &merged.dangling);
-    let dangling: Vec<u32> = merged
-        .dangling
-        .iter()
-        .copied()
-        .filter(|e| !zipped.contains(e))
-        .collect();
-    let cut_edges: Vec<u32> = merged
-        .cut
-        .iter()
-        .copied()
-        .filter(|e| !zipped.contains(e))
-        .collect();
+    let unzipped = |edges: &[u32]| -> Vec<u32> {
+        edges
+            .iter()
+            .copied()
+            .filter(|e| !zipped.contains(e))
+            .collect()
+    };
+    let (dangling, cut_edges) = (unzipped(&merged.dangling), unzipped(&merged.cut));
     let (mut cut_mesh, vertex_map) = cut_mesh(mesh, &face_charts, &cut_edges)?;
     let mut fl_report = None;
     if params.then == Then::FlMesh {

@@ -81,7 +81,7 @@ pub fn run(
             if control.cancelled() {
                 return Err(AlgoError::Cancelled);
             }
-            flood(dual, &seeds, &proxies, &mut labels, &mut heap);
+            flood(dual, &seeds, &proxies, &|_| true, &mut labels, &mut heap);
             out.lloyd_iterations += 1;
             fit(dual, &labels, &mut proxies, &mut seeds);
             if labels == previous {
@@ -141,11 +141,13 @@ impl PartialOrd for Entry {
     }
 }
 
-/// The flooding partition from `seeds` with proxies `proxies`.
+/// The flooding partition from `seeds` with proxies `proxies`, over the faces `inside`
+/// accepts (the others stay `NONE`).
 fn flood(
     dual: &Dual,
     seeds: &[usize],
     proxies: &[[f64; 3]],
+    inside: &dyn Fn(usize) -> bool,
     labels: &mut [u32],
     heap: &mut BinaryHeap<Entry>,
 ) {
@@ -156,7 +158,7 @@ fn flood(
     }
     for (i, &s) in seeds.iter().enumerate() {
         for (g, _) in dual.arcs(s) {
-            if labels[g] == NONE {
+            if labels[g] == NONE && inside(g) {
                 heap.push(Entry(face_error(dual, g, proxies[i]), g as u32, i as u32));
             }
         }
@@ -168,18 +170,19 @@ fn flood(
         }
         labels[f] = i;
         for (g, _) in dual.arcs(f) {
-            if labels[g] == NONE {
+            if labels[g] == NONE && inside(g) {
                 heap.push(Entry(face_error(dual, g, proxies[i as usize]), g as u32, i));
             }
         }
     }
 }
 
-/// Refit every proxy to its chart and move its seed to the chart's lowest-error face.
+/// Refit every proxy to its chart and move its seed to the chart's lowest-error face (faces
+/// labelled `NONE` belong to no chart).
 fn fit(dual: &Dual, labels: &[u32], proxies: &mut [[f64; 3]], seeds: &mut [usize]) {
     let k = proxies.len();
     let mut sum = vec![[0.0f64; 3]; k];
-    for (f, &l) in labels.iter().enumerate() {
+    for (f, &l) in labels.iter().enumerate().filter(|(_, &l)| l != NONE) {
         let (n, a) = (dual.normal[f], dual.area[f]);
         for c in 0..3 {
             sum[l as usize][c] += a * n[c];
@@ -193,7 +196,7 @@ fn fit(dual: &Dual, labels: &[u32], proxies: &mut [[f64; 3]], seeds: &mut [usize
         }
     }
     let mut best = vec![(f64::INFINITY, usize::MAX); k];
-    for (f, &l) in labels.iter().enumerate() {
+    for (f, &l) in labels.iter().enumerate().filter(|(_, &l)| l != NONE) {
         let e = face_error(dual, f, proxies[l as usize]);
         let b = &mut best[l as usize];
         if e < b.0 {
@@ -238,16 +241,14 @@ fn worst_faces(
 }
 
 /// Two-proxy VSA inside one chart (`faces`, connected): seeds at the chart's lowest- and
-/// highest-error faces against its own proxy, flooded within the chart, a few Lloyd
-/// iterations. Returns, per face of `faces`, whether it went to the second part; both parts
-/// are connected and non-empty.
+/// highest-error faces against its own proxy, [`flood`] and [`fit`] within the chart, at most
+/// ten Lloyd iterations. Returns, per face of `faces`, whether it went to the second part;
+/// both parts are connected and non-empty.
 pub fn split(dual: &Dual, faces: &[u32]) -> Vec<bool> {
-    let mut local = vec![NONE; dual.len()];
-    for (i, &f) in faces.iter().enumerate() {
-        local[f as usize] = i as u32;
-    }
+    let mut inside = vec![false; dual.len()];
     let mut sum = [0.0f64; 3];
     for &f in faces {
+        inside[f as usize] = true;
         let (n, a) = (dual.normal[f as usize], dual.area[f as usize]);
         for c in 0..3 {
             sum[c] += a * n[c];
@@ -271,65 +272,22 @@ pub fn split(dual: &Dual, faces: &[u32]) -> Vec<bool> {
     }
     let mut seeds = [lo as usize, hi as usize];
     let mut proxies = [dual.normal[seeds[0]], dual.normal[seeds[1]]];
-    let mut part = vec![NONE; faces.len()];
+    let mut labels = vec![NONE; dual.len()];
     let mut heap = BinaryHeap::new();
     for _ in 0..10 {
-        part.fill(NONE);
-        heap.clear();
-        for (i, &s) in seeds.iter().enumerate() {
-            part[local[s] as usize] = i as u32;
-        }
-        for (i, &s) in seeds.iter().enumerate() {
-            for (g, _) in dual.arcs(s) {
-                if local[g] != NONE {
-                    heap.push(Entry(face_error(dual, g, proxies[i]), g as u32, i as u32));
-                }
-            }
-        }
-        while let Some(Entry(_, f, i)) = heap.pop() {
-            let l = local[f as usize] as usize;
-            if part[l] != NONE {
-                continue;
-            }
-            part[l] = i;
-            for (g, _) in dual.arcs(f as usize) {
-                if local[g] != NONE && part[local[g] as usize] == NONE {
-                    heap.push(Entry(face_error(dual, g, proxies[i as usize]), g as u32, i));
-                }
-            }
-        }
-        // Refit both proxies and reseed at each part's lowest-error face.
-        let mut sums = [[0.0f64; 3]; 2];
-        for (l, &f) in faces.iter().enumerate() {
-            let (n, a) = (dual.normal[f as usize], dual.area[f as usize]);
-            for c in 0..3 {
-                sums[part[l] as usize][c] += a * n[c];
-            }
-        }
-        let mut moved = false;
-        for i in 0..2 {
-            let n = crate::geometry::normalize(sums[i]);
-            if n != [0.0; 3] {
-                proxies[i] = n;
-            }
-            let best = faces
-                .iter()
-                .enumerate()
-                .filter(|&(l, _)| part[l] == i as u32)
-                .map(|(_, &f)| f as usize)
-                .min_by(|&a, &b| {
-                    face_error(dual, a, proxies[i])
-                        .total_cmp(&face_error(dual, b, proxies[i]))
-                        .then(a.cmp(&b))
-                });
-            if let Some(b) = best {
-                moved |= b != seeds[i];
-                seeds[i] = b;
-            }
-        }
-        if !moved {
+        flood(
+            dual,
+            &seeds,
+            &proxies,
+            &|f| inside[f],
+            &mut labels,
+            &mut heap,
+        );
+        let before = seeds;
+        fit(dual, &labels, &mut proxies, &mut seeds);
+        if seeds == before {
             break;
         }
     }
-    part.iter().map(|&p| p == 1).collect()
+    faces.iter().map(|&f| labels[f as usize] == 1).collect()
 }
