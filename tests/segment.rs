@@ -550,20 +550,65 @@ fn parameters_out_of_range_are_named() {
     }
 }
 
-/// `then = fl-mesh`: fl-mesh converges, chart boundaries stay where they were (so the charts
-/// still sew together), and every pattern edge has its 3D length within 0.1 %, measured from
-/// the pieces and the output mesh.
-fn check_exact(name: &str, mesh: &Mesh, merge: MergeMode) {
+/// Corner angle sum at every vertex whose fan is closed (each of its edges shared by two
+/// faces), by brute force from the positions.
+fn closed_fan_angle_sums(mesh: &Mesh) -> Vec<(u32, f64)> {
+    let mut sum = vec![0.0f64; mesh.num_vertices()];
+    let mut open = vec![false; mesh.num_vertices()];
+    let mut count = std::collections::HashMap::new();
+    for t in mesh.triangles() {
+        for i in 0..3 {
+            let (a, b) = (t[i], t[(i + 1) % 3]);
+            *count.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+            let [p, q, r] = [t[i], t[(i + 1) % 3], t[(i + 2) % 3]].map(|v| mesh.position(v));
+            let u = [q[0] - p[0], q[1] - p[1], q[2] - p[2]];
+            let w = [r[0] - p[0], r[1] - p[1], r[2] - p[2]];
+            let dot = u[0] * w[0] + u[1] * w[1] + u[2] * w[2];
+            let cr = [
+                u[1] * w[2] - u[2] * w[1],
+                u[2] * w[0] - u[0] * w[2],
+                u[0] * w[1] - u[1] * w[0],
+            ];
+            sum[t[i] as usize] += (cr[0] * cr[0] + cr[1] * cr[1] + cr[2] * cr[2])
+                .sqrt()
+                .atan2(dot);
+        }
+    }
+    for (&(a, b), &n) in &count {
+        if n != 2 {
+            open[a as usize] = true;
+            open[b as usize] = true;
+        }
+    }
+    (0..mesh.num_vertices() as u32)
+        .filter(|&v| !open[v as usize] && sum[v as usize] > 0.0)
+        .map(|v| (v, sum[v as usize]))
+        .collect()
+}
+
+/// `then = fl-mesh`: every chart converged, so every interior vertex of the output has its
+/// angle sum at 2π (brute force, to 1e-6 rad); chart boundaries stay where they were (so
+/// the charts still sew together); the charts partition the faces, connected; every
+/// pattern edge has its 3D length within 0.1 % and no pattern overlaps itself (brute
+/// force). Returns the report.
+fn check_exact(name: &str, mesh: &Mesh, params: &Params) -> segment::Summary {
     let params = Params {
         then: segment::Then::FlMesh,
-        merge,
-        ..Params::default()
+        ..params.clone()
     };
     let out = run(mesh, &params);
-    let s = &out.summary;
+    let s = out.summary;
     let fl = s.fl_mesh.as_ref().expect("fl-mesh ran");
     assert!(fl.converged, "{name}: {}", fl.stop_reason);
+    assert_partition(mesh, &s.face_charts, name);
+    assert_eq!(fl.charts.len(), s.charts.merged, "{name}");
     let cut = out.mesh.as_ref().unwrap();
+    for (v, sum) in closed_fan_angle_sums(cut) {
+        assert!(
+            (sum - 2.0 * std::f64::consts::PI).abs() <= 1e-6,
+            "{name}: vertex {v} has angle sum {sum}"
+        );
+    }
     for v in 0..cut.num_vertices() as u32 {
         if cut.conn().kind(v) == flatmesh::mesh::VertexKind::Boundary {
             assert_eq!(
@@ -573,7 +618,9 @@ fn check_exact(name: &str, mesh: &Mesh, merge: MergeMode) {
             );
         }
     }
-    for p in &out.patterns.as_ref().unwrap().pieces {
+    let pieces = &out.patterns.as_ref().unwrap().pieces;
+    assert_eq!(pieces.len(), s.charts.merged, "{name}");
+    for p in pieces {
         let e = flatmesh::corpus::pattern_checks::edge_length_error(cut, p);
         assert!(
             e <= 1e-3,
@@ -581,29 +628,101 @@ fn check_exact(name: &str, mesh: &Mesh, merge: MergeMode) {
             p.patch,
             100.0 * e
         );
+        assert!(
+            !independent_measures(cut, p).2,
+            "{name} {}: the pattern overlaps itself",
+            p.patch
+        );
     }
+    s
 }
 
 #[test]
 fn then_fl_mesh_makes_every_chart_isometric() {
-    check_exact("saddle", &fixture("saddle"), MergeMode::Patch);
-    check_exact(
-        "hemisphere_cap",
-        &fixture("hemisphere_cap"),
-        MergeMode::Patch,
-    );
+    let patch = Params::default();
+    check_exact("saddle", &fixture("saddle"), &patch);
+    check_exact("hemisphere_cap", &fixture("hemisphere_cap"), &patch);
     for rel in [
         "garment/diffavatar_tshirt.obj",
         "shoe/mh_shoes01.obj",
         "classic/od_spot_lowres.obj",
     ] {
         if let Some(m) = shared(rel) {
-            check_exact(rel, &m, MergeMode::Patch);
+            check_exact(rel, &m, &patch);
         }
     }
     // With slits (boundary merging) too.
     if let Some(m) = shared("classic/od_spot_lowres.obj") {
-        check_exact("spot boundary", &m, MergeMode::Boundary);
+        let boundary = Params {
+            merge: MergeMode::Boundary,
+            ..Params::default()
+        };
+        check_exact("spot boundary", &m, &boundary);
+    }
+}
+
+/// A sphere with one small hole, `n` rings of `2n` quads from the hole's rim to the pole.
+fn pouch(n: usize) -> Mesh {
+    let m = 2 * n;
+    let ring = |i: usize| {
+        // Polar angle from 40° at the rim to 180° at the pole.
+        let t = (40.0 + 140.0 * i as f64 / n as f64).to_radians();
+        (0..m)
+            .map(|j| {
+                let a = std::f64::consts::TAU * j as f64 / m as f64;
+                [t.sin() * a.cos(), t.sin() * a.sin(), t.cos()]
+            })
+            .collect::<Vec<_>>()
+    };
+    let mut positions: Vec<[f64; 3]> = (0..n).flat_map(ring).collect();
+    positions.push([0.0, 0.0, -1.0]);
+    let pole = (positions.len() - 1) as u32;
+    let at = |i: usize, j: usize| (i * m + j % m) as u32;
+    let mut triangles = Vec::new();
+    for i in 0..n - 1 {
+        for j in 0..m {
+            triangles.push([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
+            triangles.push([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
+        }
+    }
+    for j in 0..m {
+        triangles.push([at(n - 1, j), pole, at(n - 1, j + 1)]);
+    }
+    Mesh::new(RawMesh {
+        positions,
+        triangles,
+        ..RawMesh::default()
+    })
+    .unwrap()
+    .0
+}
+
+/// A chart that fl-mesh cannot make flattenable with its boundary fixed, or whose
+/// isometric pattern wraps onto itself, is split until every piece passes: a pouch kept as
+/// one chart (one VSA chart, bounds so loose that it is not split before fl-mesh) must be
+/// split, and ends with every piece exactly flattenable.
+#[test]
+fn then_fl_mesh_splits_a_chart_it_cannot_flatten() {
+    let loose = Params {
+        max_charts: 1,
+        max_area_distortion: 100.0,
+        max_l2_stretch: 1e6,
+        reject_overlap: false,
+        ..Params::default()
+    };
+    for n in [6, 12] {
+        let s = check_exact(&format!("pouch {n}"), &pouch(n), &loose);
+        let fl = s.fl_mesh.unwrap();
+        assert!(
+            s.charts.tested == 1 && !fl.failures.is_empty(),
+            "pouch {n}: nothing was split ({:?}, {:?})",
+            s.charts,
+            fl.stop_reason
+        );
+        assert_eq!(
+            fl.charts.iter().map(|c| c.faces).sum::<usize>(),
+            s.face_charts.len()
+        );
     }
 }
 

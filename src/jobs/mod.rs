@@ -169,8 +169,10 @@ impl Kind {
                  interior=arap|harmonic (arap), boundary_angles=conformal|surface (conformal), \
                  unit=mm|cm|dm|m|in (mm), input_unit=auto|mm|cm|dm|m|in (auto), \
                  then=none|fl-mesh (none; fl-mesh: every chart made exactly flattenable, its \
-                 boundary fixed, before flattening), fl_mesh={...} (the fl-mesh parameters of \
-                 that run; refine must stay false)"
+                 boundary fixed, before flattening; a chart that fails is split), \
+                 fl_mesh={...} (the fl-mesh parameters of that run; refine must stay false), \
+                 max_stretch (0.1 %: with then=fl-mesh, a chart whose pattern stretches more \
+                 is split)"
             }
         }
     }

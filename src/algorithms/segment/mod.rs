@@ -17,14 +17,14 @@
 //! defaults are `flatten`'s (ARAP interior, conformal boundary angles), which flatten a
 //! chart with less stretch and so accept larger charts at the same bounds.
 //!
-//! Beyond the paper, which stops at quasi-developable charts: `then = fl-mesh` runs fl-mesh
-//! on the cut mesh before the final flattening. The charts are not welded to each other
-//! there, so every chart boundary is mesh boundary, which fl-mesh never moves: the charts
-//! still sew together, and each converged chart is exactly flattenable, its pattern isometric
-//! up to the solver tolerance. fl-mesh's refinement is refused there (it would add vertices
-//! and split faces, breaking the maps back to the input). That final flattening opens holes
-//! that enclose curvature by a real cut (`cuts = auto`, as `flatten` by default): a
-//! developable ring around a sleeve cannot be laid flat with its hole closed.
+//! Beyond the paper, which stops at quasi-developable charts: `then = fl-mesh` runs
+//! [`fl_charts::run`] before the final flattening: fl-mesh on every chart on its own, its
+//! boundary fixed (so the charts still sew together), a chart that fails (fl-mesh stalls,
+//! or its isometric pattern overlaps or stretches) split until each passes. fl-mesh's
+//! refinement is refused there (it would add vertices and split faces, breaking the maps
+//! back to the input). That final flattening opens holes that enclose curvature by a real
+//! cut (`cuts = auto`, as `flatten` by default): a developable ring around a sleeve cannot
+//! be laid flat with its hole closed.
 //!
 //! Step 3, [`denoise::run`], is optional and off by default: it moves the chart-boundary
 //! vertices of the user's mesh (the output mesh, the merging and the patterns then use the
@@ -32,6 +32,7 @@
 
 pub mod denoise;
 pub mod dual;
+pub mod fl_charts;
 pub mod merge;
 pub mod mincut;
 pub mod vsa;
@@ -40,7 +41,7 @@ use super::fl_mesh;
 use super::flatten::{self, cut::Cuts, param};
 use super::flatten::{InputUnit, Unit};
 use super::{bad_param, AlgoError, Control, Outcome};
-use crate::mesh::{Mesh, RawMesh};
+use crate::mesh::{Mesh, RawMesh, NONE};
 use serde::{Deserialize, Serialize};
 use std::collections::HashSet;
 use std::time::Instant;
@@ -81,6 +82,9 @@ fn d_area() -> f64 {
 }
 fn d_l2() -> f64 {
     2.0
+}
+fn d_max_stretch() -> f64 {
+    0.1
 }
 fn d_true() -> bool {
     true
@@ -163,6 +167,10 @@ pub struct Params {
     /// Parameters of that fl-mesh run (fl-mesh's defaults, refinement off).
     #[serde(default = "d_fl_mesh")]
     pub fl_mesh: fl_mesh::Params,
+    /// With `then = fl-mesh`: a chart whose pattern stretches an edge by more than this
+    /// (percent, 0.1) is split, as one on which fl-mesh stalls or whose pattern overlaps.
+    #[serde(default = "d_max_stretch")]
+    pub max_stretch: f64,
 }
 
 impl Default for Params {
@@ -185,6 +193,7 @@ impl Default for Params {
             input_unit: InputUnit::default(),
             then: Then::Nothing,
             fl_mesh: d_fl_mesh(),
+            max_stretch: d_max_stretch(),
         }
     }
 }
@@ -215,6 +224,12 @@ impl Params {
             return Err(bad_param(
                 "max_l2_stretch",
                 "must be above 1 (no flattening stretches less) and finite",
+            ));
+        }
+        if !(self.max_stretch > 0.0 && self.max_stretch.is_finite()) {
+            return Err(bad_param(
+                "max_stretch",
+                "must be above 0 (percent) and finite",
             ));
         }
         if self.fl_mesh.refine {
@@ -318,9 +333,9 @@ pub struct Summary {
     pub all_within_bounds: bool,
     /// Largest edge stretch over the final pieces, percent (flatten's `stretch_max_pct`).
     pub worst_stretch_max_pct: f64,
-    /// What fl-mesh did on the cut mesh (`then = fl-mesh`).
+    /// What fl-mesh did on the charts, split until each passed (`then = fl-mesh`).
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub fl_mesh: Option<fl_mesh::Report>,
+    pub fl_mesh: Option<fl_charts::FlCharts>,
     /// Hausdorff distance from the output mesh to the input (0 unless `then = fl-mesh` or
     /// `denoise`).
     pub hausdorff_to_input: super::Distance,
@@ -395,14 +410,6 @@ pub fn run(
             .collect()
     };
     let (dangling, cut_edges) = (unzipped(&merged.dangling), unzipped(&merged.cut));
-    let (mut cut_mesh, vertex_map) = cut_mesh(mesh, &face_charts, &cut_edges)?;
-    let mut fl_report = None;
-    if params.then == Then::FlMesh {
-        let (m, r) = fl_mesh::solve(&cut_mesh, &params.fl_mesh, control)?;
-        cut_mesh = m;
-        fl_report = Some(r);
-    }
-    let hausdorff_to_input = super::Distance::hausdorff(&cut_mesh, input);
     // After fl-mesh a chart with a hole is developable but the hole may enclose curvature,
     // which no flattening can close without stretch: `cuts = auto` opens such holes by a real
     // cut (a seam of the piece with itself), as `flatten` does by default.
@@ -413,6 +420,38 @@ pub fn run(
             ..criteria.flatten.clone()
         },
     };
+    let (face_charts, cut_mesh, vertex_map, fl_report) = match params.then {
+        Then::Nothing => {
+            let (m, map) = cut_mesh(mesh, &face_charts, &cut_edges)?;
+            (face_charts, m, map, None)
+        }
+        Then::FlMesh => {
+            let settings = fl_charts::Settings {
+                fl_mesh: &params.fl_mesh,
+                flatten: &final_flatten,
+                max_stretch_pct: params.max_stretch,
+                max_charts: fl_charts::MAX_CHARTS,
+            };
+            let k = count(&face_charts);
+            let d = fl_charts::run(mesh, &dual, &face_charts, k, &dangling, &settings, control)?;
+            let face_charts = renumber(&d.labels);
+            let cut_edges = cut_between(mesh, &face_charts, &dangling);
+            let (m, map) = cut_mesh(mesh, &face_charts, &cut_edges)?;
+            let (m, stuck) = with_corners(&m, &d.corners, &d.stuck)?;
+            let mut report = d.report;
+            report.stuck_vertices = stuck;
+            let mut first = std::collections::HashMap::new();
+            for (f, &l) in d.labels.iter().enumerate() {
+                first.entry(l).or_insert(f);
+            }
+            for c in &mut report.charts {
+                c.chart = face_charts[first[&c.chart]];
+            }
+            report.charts.sort_by_key(|c| c.chart);
+            (face_charts, m, map, Some(report))
+        }
+    };
+    let hausdorff_to_input = super::Distance::hausdorff(&cut_mesh, input);
     let mut flat = flatten::run(&cut_mesh, &final_flatten, control)?;
     if let Some(patterns) = flat.patterns.as_mut() {
         seams_on_input(mesh, patterns, &vertex_map, &dangling);
@@ -537,6 +576,43 @@ impl Worst {
         }
         w
     }
+}
+
+/// Interior edges between faces of different charts, and `dangling`, ascending.
+fn cut_between(mesh: &Mesh, charts: &[u32], dangling: &[u32]) -> Vec<u32> {
+    let slit: HashSet<u32> = dangling.iter().copied().collect();
+    let ef = mesh.conn().edge_faces();
+    (0..ef.len() as u32)
+        .filter(|&e| {
+            let [f, g] = ef[e as usize];
+            g != NONE && (charts[f as usize] != charts[g as usize] || slit.contains(&e))
+        })
+        .collect()
+}
+
+/// `cut` (the input cut into its charts, faces in the input's order) with every face
+/// corner at `corners[3f + i]`, and the output vertex of each corner of `stuck`.
+fn with_corners(
+    cut: &Mesh,
+    corners: &[[f64; 3]],
+    stuck: &[(u32, u8)],
+) -> Result<(Mesh, Vec<u32>), AlgoError> {
+    let mut pos = cut.positions().to_vec();
+    for (f, t) in cut.triangles().iter().enumerate() {
+        for (i, &v) in t.iter().enumerate() {
+            pos[v as usize] = corners[3 * f + i];
+        }
+    }
+    let m = cut
+        .with_positions(pos)
+        .map_err(|e| AlgoError::Input(format!("fl-mesh on the charts failed: {e}")))?;
+    let mut ids: Vec<u32> = stuck
+        .iter()
+        .map(|&(f, i)| cut.triangles()[f as usize][i as usize])
+        .collect();
+    ids.sort_unstable();
+    ids.dedup();
+    Ok((m, ids))
 }
 
 /// Number of distinct labels.
