@@ -7,8 +7,10 @@
 //! Before timing, one checked run per mesh prints the chart counts per stage, the worst
 //! chart, the flattenings run, the seconds per stage and the run's peak heap.
 //!
-//! Measured (2-core VM, defaults, medians of 10): bff_face 11.0 s (VSA 2.0, merging 9.0 s
-//! over 343 flattenings, 162 → 15 charts), hemisphere 64k 4.7 s (64 → 8 charts).
+//! Measured (2-core VM, defaults, medians of 10): bff_face 8.88 s (VSA 1.47, merging 7.35 s
+//! over 343 flattenings, 162 → 15 charts, peak heap 219 MB), hemisphere 64k 3.46 s (64 → 8
+//! charts, 38 MB); before the counting sort of half-edges and the packed VSA heap key:
+//! 11.0 s and 4.7 s (criterion's change against that baseline: −19 % and −27 %).
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use flatmesh::algorithms::develop::loop_subdivide;

@@ -48,14 +48,7 @@ pub(crate) fn wedges(
     is_cut: impl Fn(u32, u32) -> bool,
 ) -> (Vec<u32>, usize, Vec<bool>) {
     let nh = tris.len() * 3;
-    let mut he: Vec<(u32, u32, u32)> = Vec::with_capacity(nh);
-    for (f, t) in tris.iter().enumerate() {
-        for i in 0..3 {
-            let (a, b) = key(t[i], t[(i + 1) % 3]);
-            he.push((a, b, (3 * f + i) as u32));
-        }
-    }
-    he.sort_unstable();
+    let he = half_edges_sorted(tris);
     let mut parent: Vec<u32> = (0..nh as u32).collect();
     let mut boundary = vec![true; nh];
     let mut i = 0;
@@ -90,6 +83,55 @@ pub(crate) fn wedges(
         *cl = root_class[r];
     }
     (class, n as usize, boundary)
+}
+
+/// Every half-edge as (lower vertex, higher vertex, corner `3f + i`), sorted: a counting sort
+/// on the lower vertex, then each bucket (a vertex's few edges) by insertion (by a comparison
+/// sort when a vertex has many). Segmentation
+/// builds pieces for hundreds of candidate charts; a comparison sort of the tuples here was
+/// 12 % of segmenting a 34k-face scan.
+fn half_edges_sorted(tris: &[[u32; 3]]) -> Vec<(u32, u32, u32)> {
+    let nv = tris
+        .iter()
+        .flatten()
+        .map(|&v| v as usize + 1)
+        .max()
+        .unwrap_or(0);
+    let mut start = vec![0u32; nv + 1];
+    for t in tris {
+        for i in 0..3 {
+            start[t[i].min(t[(i + 1) % 3]) as usize + 1] += 1;
+        }
+    }
+    for v in 0..nv {
+        start[v + 1] += start[v];
+    }
+    let mut he = vec![(0u32, 0u32, 0u32); tris.len() * 3];
+    let mut fill = start.clone();
+    for (f, t) in tris.iter().enumerate() {
+        for i in 0..3 {
+            let (a, b) = key(t[i], t[(i + 1) % 3]);
+            let slot = &mut fill[a as usize];
+            he[*slot as usize] = (a, b, (3 * f + i) as u32);
+            *slot += 1;
+        }
+    }
+    for v in 0..nv {
+        let bucket = &mut he[start[v] as usize..start[v + 1] as usize];
+        if bucket.len() > 16 {
+            // A high-valence vertex (a fan): no quadratic insertion sort.
+            bucket.sort_unstable();
+            continue;
+        }
+        for k in 1..bucket.len() {
+            let mut j = k;
+            while j > 0 && bucket[j - 1] > bucket[j] {
+                bucket.swap(j - 1, j);
+                j -= 1;
+            }
+        }
+    }
+    he
 }
 
 /// Boundary loops of a wedge split: cycles of wedges along boundary half-edges, surface on
@@ -154,6 +196,9 @@ pub struct Piece3 {
     pub pos: Vec<[f64; 3]>,
     /// Local triangles.
     pub tris: Vec<[u32; 3]>,
+    /// 3D corner angles of each local triangle, at its vertices in order (computed once:
+    /// the cuts, the boundary angles and LPFB all need them).
+    pub corners: Vec<[f64; 3]>,
     /// Boundary loops (local vertices, surface on the left); outer (longest in 3D) first.
     pub loops: Vec<Vec<u32>>,
 }
@@ -266,12 +311,21 @@ impl Piece3 {
         if !loops.is_empty() {
             loops.swap(0, outer);
         }
+        let corners = tris
+            .iter()
+            .map(|t| {
+                let q = t.map(|w| pos[w as usize]);
+                [0, 1, 2]
+                    .map(|i| crate::geometry::corner_angle(q[i], q[(i + 1) % 3], q[(i + 2) % 3]))
+            })
+            .collect();
         Ok(Piece3 {
             name,
             faces,
             vertex_ids,
             pos,
             tris,
+            corners,
             loops,
         })
     }
@@ -279,11 +333,9 @@ impl Piece3 {
     /// Angle sum of each local vertex: the 3D corner angles of its wedge.
     pub fn angle_sums(&self) -> Vec<f64> {
         let mut sum = vec![0.0; self.pos.len()];
-        for t in &self.tris {
-            let q = t.map(|w| self.pos[w as usize]);
+        for (t, a) in self.tris.iter().zip(&self.corners) {
             for i in 0..3 {
-                sum[t[i] as usize] +=
-                    crate::geometry::corner_angle(q[i], q[(i + 1) % 3], q[(i + 2) % 3]);
+                sum[t[i] as usize] += a[i];
             }
         }
         sum

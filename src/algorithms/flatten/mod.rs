@@ -379,23 +379,7 @@ pub fn lpfb_boundary(
 ) -> Result<Vec<Option<[f64; 2]>>, AlgoError> {
     let err = |e: String| AlgoError::Input(format!("piece `{}`: {e}", p.name));
     let paths = cut::cut_paths(p)?;
-    let corner: Vec<[f64; 3]> = p
-        .tris
-        .iter()
-        .map(|t| {
-            let q = [
-                p.pos[t[0] as usize],
-                p.pos[t[1] as usize],
-                p.pos[t[2] as usize],
-            ];
-            [
-                crate::geometry::corner_angle(q[0], q[1], q[2]),
-                crate::geometry::corner_angle(q[1], q[2], q[0]),
-                crate::geometry::corner_angle(q[2], q[0], q[1]),
-            ]
-        })
-        .collect();
-    let cl = cut::cut_loop(p, &paths, &corner).map_err(err)?;
+    let cl = cut::cut_loop(p, &paths, &p.corners).map_err(err)?;
     let n = cl.vertex.len();
     let lengths: Vec<f64> = (0..n)
         .map(|k| {

@@ -20,7 +20,6 @@
 use super::dual::{components, Dual};
 use crate::algorithms::{AlgoError, Control, Progress};
 use crate::mesh::NONE;
-use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
 /// What VSA produced.
@@ -124,20 +123,24 @@ pub fn run(
     Ok(out)
 }
 
-/// Heap entry ordered so that the lowest error pops first, ties by face then proxy.
-#[derive(PartialEq)]
-struct Entry(f64, u32, u32);
-impl Eq for Entry {}
-impl Ord for Entry {
-    fn cmp(&self, o: &Self) -> Ordering {
-        o.0.total_cmp(&self.0)
-            .then(o.1.cmp(&self.1))
-            .then(o.2.cmp(&self.2))
+/// Heap entry: error, face and proxy packed in one integer so that the lowest error pops
+/// first, ties by face then proxy (an error is ≥ 0, so its bits order as it does). One
+/// integer comparison instead of three: flooding was 18 % of segmenting a 34k-face scan.
+#[derive(PartialEq, Eq, PartialOrd, Ord)]
+struct Entry(std::cmp::Reverse<u128>);
+
+impl Entry {
+    fn new(error: f64, face: usize, proxy: u32) -> Entry {
+        let bits = if error > 0.0 { error.to_bits() } else { 0 };
+        Entry(std::cmp::Reverse(
+            (u128::from(bits) << 64) | (u128::from(face as u32) << 32) | u128::from(proxy),
+        ))
     }
-}
-impl PartialOrd for Entry {
-    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
-        Some(self.cmp(o))
+    fn face(&self) -> usize {
+        (self.0 .0 >> 32) as u32 as usize
+    }
+    fn proxy(&self) -> u32 {
+        self.0 .0 as u32
     }
 }
 
@@ -159,19 +162,19 @@ fn flood(
     for (i, &s) in seeds.iter().enumerate() {
         for (g, _) in dual.arcs(s) {
             if labels[g] == NONE && inside(g) {
-                heap.push(Entry(face_error(dual, g, proxies[i]), g as u32, i as u32));
+                heap.push(Entry::new(face_error(dual, g, proxies[i]), g, i as u32));
             }
         }
     }
-    while let Some(Entry(_, f, i)) = heap.pop() {
-        let f = f as usize;
+    while let Some(e) = heap.pop() {
+        let (f, i) = (e.face(), e.proxy());
         if labels[f] != NONE {
             continue;
         }
         labels[f] = i;
         for (g, _) in dual.arcs(f) {
             if labels[g] == NONE && inside(g) {
-                heap.push(Entry(face_error(dual, g, proxies[i as usize]), g as u32, i));
+                heap.push(Entry::new(face_error(dual, g, proxies[i as usize]), g, i));
             }
         }
     }
