@@ -135,15 +135,7 @@ pub fn run(
     control: &dyn Control,
 ) -> Result<Developed, AlgoError> {
     let slit_edges: HashSet<u32> = slits.iter().copied().collect();
-    let all = mesh.conn().edges();
-    let slits: HashSet<(u32, u32)> = slits
-        .iter()
-        .map(|&e| {
-            let [a, b] = all[e as usize];
-            (a.min(b), a.max(b))
-        })
-        .collect();
-    let slits = &slits;
+    let slits = &super::vertex_pairs(mesh, slits);
     let mut labels = labels.to_vec();
     let mut members = vec![Vec::new(); k];
     for (f, &c) in labels.iter().enumerate() {

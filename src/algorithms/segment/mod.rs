@@ -578,6 +578,18 @@ impl Worst {
     }
 }
 
+/// Mesh edges `edges` as vertex pairs, smaller first (how pieces are told where to cut).
+pub fn vertex_pairs(mesh: &Mesh, edges: &[u32]) -> HashSet<(u32, u32)> {
+    let all = mesh.conn().edges();
+    edges
+        .iter()
+        .map(|&e| {
+            let [a, b] = all[e as usize];
+            (a.min(b), a.max(b))
+        })
+        .collect()
+}
+
 /// Interior edges between faces of different charts, and `dangling`, ascending.
 fn cut_between(mesh: &Mesh, charts: &[u32], dangling: &[u32]) -> Vec<u32> {
     let slit: HashSet<u32> = dangling.iter().copied().collect();
@@ -638,14 +650,7 @@ pub fn renumber(labels: &[u32]) -> Vec<u32> {
 /// boundary cannot be split in a mesh whose charts share vertices, and a re-flattening of
 /// this mesh must see exactly the pieces merging tested.
 pub fn cut_mesh(mesh: &Mesh, charts: &[u32], cut: &[u32]) -> Result<(Mesh, Vec<u32>), AlgoError> {
-    let edges = mesh.conn().edges();
-    let cut: HashSet<(u32, u32)> = cut
-        .iter()
-        .map(|&e| {
-            let [a, b] = edges[e as usize];
-            (a.min(b), a.max(b))
-        })
-        .collect();
+    let cut = vertex_pairs(mesh, cut);
     let tris = mesh.triangles();
     let (class, n, _) = flatten::cut::wedges(tris, |a, b| cut.contains(&(a, b)));
     let mut vertex_map = vec![0u32; n];
