@@ -37,9 +37,18 @@ pub struct Config {
     /// Address to listen on (port 0 picks a free port; the address is printed on stdout).
     #[arg(long, env = "FLATMESH_BIND", default_value = "127.0.0.1:8080")]
     pub bind: String,
-    /// Directory of the embedded store (SQLite index, uploads, results).
+    /// Directory of the embedded store (SQLite index, uploads, results); with
+    /// `--database-url`, only the generated webhook secret is kept there.
     #[arg(long, env = "FLATMESH_DATA_DIR", default_value = "flatmesh-data")]
     pub data_dir: PathBuf,
+    /// PostgreSQL database shared by every replica (`postgres://user:pass@host:5432/db`):
+    /// jobs, uploads and results all live there. Without it, the embedded SQLite store in
+    /// the data directory.
+    #[arg(long, env = "FLATMESH_DATABASE_URL", hide_env_values = true)]
+    pub database_url: Option<String>,
+    /// Most PostgreSQL connections of this replica.
+    #[arg(long, env = "FLATMESH_DATABASE_CONNECTIONS", default_value_t = 16)]
+    pub database_connections: usize,
     /// Worker threads running jobs (0: one per core).
     #[arg(long, env = "FLATMESH_WORKERS", default_value_t = 0)]
     pub workers: usize,

@@ -33,7 +33,7 @@ use state::AppState;
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Duration;
-use store::{SqliteStore, Store};
+use store::{PgStore, SqliteStore, Store};
 use webhook::Webhooks;
 use worker::{Executor, Limits};
 
@@ -49,13 +49,33 @@ pub fn serve(cfg: Config) -> Result<(), String> {
     rt.block_on(serve_async(cfg))
 }
 
+/// The store the configuration names: PostgreSQL with `--database-url`, else SQLite in the
+/// data directory (opened off the async threads: both block).
+async fn open_store(cfg: &Config) -> Result<Arc<dyn Store>, String> {
+    let (url, dir, conns) = (
+        cfg.database_url.clone(),
+        cfg.data_dir.clone(),
+        cfg.database_connections,
+    );
+    tokio::task::spawn_blocking(move || -> Result<Arc<dyn Store>, String> {
+        Ok(match url {
+            Some(url) => Arc::new(
+                PgStore::open(&url, conns).map_err(|e| format!("cannot open the database: {e}"))?,
+            ),
+            None => Arc::new(
+                SqliteStore::open(&dir)
+                    .map_err(|e| format!("cannot open the store in {}: {e}", dir.display()))?,
+            ),
+        })
+    })
+    .await
+    .map_err(|e| e.to_string())?
+}
+
 async fn serve_async(cfg: Config) -> Result<(), String> {
     std::fs::create_dir_all(&cfg.data_dir)
         .map_err(|e| format!("cannot create {}: {e}", cfg.data_dir.display()))?;
-    let store: Arc<dyn Store> = Arc::new(
-        SqliteStore::open(&cfg.data_dir)
-            .map_err(|e| format!("cannot open the store in {}: {e}", cfg.data_dir.display()))?,
-    );
+    let store = open_store(&cfg).await?;
     let metrics = Arc::new(Metrics::default());
     let mut hooks = Webhooks::new(
         webhook::signing_key(cfg.webhook_secret.as_deref(), &cfg.data_dir)?,
@@ -81,7 +101,11 @@ async fn serve_async(cfg: Config) -> Result<(), String> {
     };
     let exec = Executor::new(store.clone(), limits, metrics.clone(), webhooks.clone())
         .map_err(|e| e.to_string())?;
-    let (queued, cancelled) = exec.recover().map_err(|e| format!("recovery: {e}"))?;
+    let ex = exec.clone();
+    let (queued, cancelled) = tokio::task::spawn_blocking(move || ex.recover())
+        .await
+        .map_err(|e| format!("recovery: {e}"))?
+        .map_err(|e| format!("recovery: {e}"))?;
     tracing::info!(queued, cancelled, workers, "store recovered");
     let st = AppState {
         store,

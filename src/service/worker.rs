@@ -191,6 +191,16 @@ impl Executor {
         std::thread::Builder::new()
             .name("flatmesh-heartbeat".into())
             .spawn(move || me.heartbeat_loop())?;
+        // Jobs queued through other processes wake idle claim loops at once where the store
+        // can say so (PostgreSQL); they poll every POLL in any case.
+        let weak = Arc::downgrade(&exec);
+        if let Err(e) = exec.store.watch_queue(Arc::new(move || {
+            if let Some(e) = weak.upgrade() {
+                e.wake_workers();
+            }
+        })) {
+            tracing::warn!(error = %e, "no queue notifications; idle workers poll");
+        }
         Ok(exec)
     }
 

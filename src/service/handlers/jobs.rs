@@ -293,8 +293,6 @@ async fn insert_job(
     req: Request,
     stored_here: Vec<String>,
 ) -> ApiResult {
-    // The queue is counted in the store (shared by every process): a bound, not a lock.
-    let has_room = st.exec.has_room();
     let mut record = JobRecord::queued(
         &new_id("j"),
         &req.submit.kind,
@@ -306,9 +304,10 @@ async fn insert_job(
     record.callback_url = req.submit.callback_url;
     record.idempotency_key = key;
     record.request_hash = Some(req.hash.clone());
-    let store = st.store.clone();
+    let (store, exec) = (st.store.clone(), st.exec.clone());
     let inserted = blocking(move || {
-        if !has_room {
+        // The queue is counted in the store (shared by every process): a bound, not a lock.
+        if !exec.has_room() {
             // A full queue still answers a replayed request with its job.
             if let Some(k) = &record.idempotency_key {
                 if let Some(j) = store.find_idempotent(k)? {
@@ -323,7 +322,9 @@ async fn insert_job(
     match inserted? {
         None => Err(queue_full(st)),
         Some(Inserted::New(j)) => {
-            st.exec.enqueued();
+            let exec = st.exec.clone();
+            // Counting the queue for the metrics reads the store: off the async threads.
+            let _ = tokio::task::spawn_blocking(move || exec.enqueued()).await;
             st.metrics.submitted();
             submitted(st, j, &req.hash, false)
         }

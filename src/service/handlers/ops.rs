@@ -20,18 +20,20 @@ pub async fn healthz() -> Response {
 
 /// `GET /readyz`: the store answers and the queue has room (503 otherwise).
 pub async fn readyz(State(st): State<AppState>) -> ApiResult {
-    let store = st.store.clone();
-    blocking(move || {
+    let (store, exec) = (st.store.clone(), st.exec.clone());
+    let (has_room, queued) = blocking(move || {
         store.ping().map_err(|e| {
             Problem::new(
                 StatusCode::SERVICE_UNAVAILABLE,
                 "unavailable",
                 format!("store: {e}"),
             )
-        })
+        })?;
+        let queued = exec.queued();
+        Ok((queued < exec.limits.max_queued, queued))
     })
     .await?;
-    if !st.exec.has_room() {
+    if !has_room {
         return Err(Problem::new(
             StatusCode::SERVICE_UNAVAILABLE,
             "unavailable",
@@ -40,7 +42,7 @@ pub async fn readyz(State(st): State<AppState>) -> ApiResult {
         .retry_after(st.retry_after_secs()));
     }
     Ok(
-        Json(json!({"status": "ready", "queued": st.exec.queued(), "running": st.exec.running()}))
+        Json(json!({"status": "ready", "queued": queued, "running": st.exec.running()}))
             .into_response(),
     )
 }

@@ -1,10 +1,11 @@
-//! The coordination contract of [`Store`] as an executable suite: every backend runs
-//! [`check`] against a fresh, empty store (the SQLite one in tests/store_contract.rs; the
-//! PostgreSQL one will run the same). `open` gives a second handle on the same store, as a
-//! second process would have, so that "exactly once" is checked across handles.
+//! The behaviour of [`Store`] as an executable suite: every backend runs [`check`] against a
+//! fresh, empty store (tests/store_contract.rs: SQLite and PostgreSQL). It covers the index
+//! and blob operations the service uses, then the coordination contract. `open` gives a
+//! second handle on the same store, as a second process would have, so that "exactly once"
+//! is checked across handles.
 
-use super::{CancelOutcome, Lease, Store};
-use crate::service::domain::{JobRecord, Status};
+use super::{CancelOutcome, Inserted, JobFilter, Lease, Store};
+use crate::service::domain::{JobRecord, MeshRecord, Status};
 use std::collections::HashSet;
 use std::sync::Arc;
 
@@ -20,10 +21,159 @@ fn status(s: &dyn Store, id: &str) -> Status {
 
 /// Run the whole contract; panics at the first violation, naming it.
 pub fn check(store: &dyn Store, open: &dyn Fn() -> Arc<dyn Store>) {
+    store.ping().unwrap();
+    meshes_and_blobs(store);
+    jobs_index(store, open);
     claims_in_order_and_once(store);
     heartbeats_and_cancels(store);
     expired_leases_requeue(store);
     concurrent_claims_are_exclusive(store, open);
+}
+
+fn meshes_and_blobs(s: &dyn Store) {
+    let m = MeshRecord {
+        id: "m_1".into(),
+        created_at: 5,
+        format: "obj".into(),
+        size: 1 << 40,
+        sha256: "ab".repeat(32),
+        summary: serde_json::json!({"vertices": 3, "name": "ünïcode ✓"}),
+    };
+    assert!(s.get_mesh("m_1").unwrap().is_none());
+    s.insert_mesh(&m).unwrap();
+    assert!(s.insert_mesh(&m).is_err(), "a mesh id is unique");
+    assert_eq!(s.get_mesh("m_1").unwrap().as_ref(), Some(&m));
+    // blobs: binary, overwritten atomically, deleted by exact key or by `prefix/`
+    let bytes: Vec<u8> = (0..=255u8).cycle().take(70_000).collect();
+    s.put_blob("meshes/m_1", &bytes).unwrap();
+    assert_eq!(s.get_blob("meshes/m_1").unwrap(), Some(bytes));
+    s.put_blob("meshes/m_1", b"v2").unwrap();
+    assert_eq!(s.get_blob("meshes/m_1").unwrap(), Some(b"v2".to_vec()));
+    for k in ["jobs/j_1/a.json", "jobs/j_1/b.glb", "jobs/j_10/a.json"] {
+        s.put_blob(k, k.as_bytes()).unwrap();
+    }
+    s.delete_blobs("jobs/j_1").unwrap();
+    assert_eq!(s.get_blob("jobs/j_1/a.json").unwrap(), None);
+    assert_eq!(s.get_blob("jobs/j_1/b.glb").unwrap(), None);
+    assert_eq!(
+        s.get_blob("jobs/j_10/a.json").unwrap().as_deref(),
+        Some(&b"jobs/j_10/a.json"[..]),
+        "a prefix is a path: jobs/j_1 is not jobs/j_10"
+    );
+    s.delete_blobs("jobs/j_nothing").unwrap();
+    s.delete_blobs("jobs/j_10").unwrap();
+    s.delete_blobs("meshes/m_1").unwrap();
+    assert_eq!(s.get_blob("meshes/m_1").unwrap(), None);
+    // in use while a queued or running job names it (as mesh or reference)
+    assert!(!s.mesh_in_use("m_1").unwrap());
+    let mut j = JobRecord::queued("j_m1", "report", "m_other", 1);
+    j.reference_mesh_id = Some("m_1".into());
+    s.insert_job(&j).unwrap();
+    assert!(s.mesh_in_use("m_1").unwrap());
+    let mut done = j;
+    done.status = Status::Failed;
+    s.update_job(&done).unwrap();
+    assert!(!s.mesh_in_use("m_1").unwrap());
+    assert!(s.delete_job("j_m1").unwrap());
+    assert!(s.delete_mesh("m_1").unwrap());
+    assert!(!s.delete_mesh("m_1").unwrap());
+}
+
+fn jobs_index(s: &dyn Store, open: &dyn Fn() -> Arc<dyn Store>) {
+    // every field round-trips
+    let mut j = JobRecord::queued("j_i1", "flatten", "m_a", 10);
+    j.params = serde_json::json!({"unit": "cm", "n": 1.5e-300})
+        .as_object()
+        .unwrap()
+        .clone();
+    j.callback_url = Some("https://example.com/hook?a=b".into());
+    j.idempotency_key = Some("key-1".into());
+    j.request_hash = Some("h1".into());
+    let Inserted::New(stored) = s.insert_job(&j).unwrap() else {
+        panic!("a new key inserts");
+    };
+    assert!(stored.seq > 0);
+    assert_eq!(s.get_job("j_i1").unwrap().unwrap(), stored);
+    // the same key returns the first job, from any handle, and inserts nothing
+    let mut again = JobRecord::queued("j_i2", "flatten", "m_a", 11);
+    again.idempotency_key = Some("key-1".into());
+    match open().insert_job(&again).unwrap() {
+        Inserted::Existing(e) => assert_eq!(e.id, "j_i1"),
+        Inserted::New(_) => panic!("an idempotency key inserts once"),
+    }
+    assert!(s.get_job("j_i2").unwrap().is_none());
+    assert_eq!(s.find_idempotent("key-1").unwrap().unwrap().id, "j_i1");
+    assert!(s.find_idempotent("key-none").unwrap().is_none());
+    // update keeps what it does not own and writes what it does
+    let mut u = stored.clone();
+    u.status = Status::Succeeded;
+    u.progress = Some(serde_json::json!({"stage": "lpfb", "iteration": 2}));
+    u.started_at = Some(12);
+    u.finished_at = Some(20);
+    u.expires_at = Some(1_000);
+    u.attempts = 3;
+    u.artifacts = vec!["report.json".into(), "mesh.glb".into()];
+    u.outcome = Some(serde_json::json!({"converged": true}));
+    u.error = None;
+    s.update_job(&u).unwrap();
+    assert_eq!(s.get_job("j_i1").unwrap().unwrap(), u);
+    // listing: newest first, filtered by status and kind, paged by seq
+    for (k, kind) in ["report", "flatten", "report"].iter().enumerate() {
+        s.insert_job(&JobRecord::queued(&format!("j_l{k}"), kind, "m_a", 30))
+            .unwrap();
+    }
+    let all = s
+        .list_jobs(&JobFilter {
+            limit: 10,
+            ..JobFilter::default()
+        })
+        .unwrap();
+    let ids: Vec<&str> = all.iter().map(|j| j.id.as_str()).collect();
+    assert_eq!(ids, ["j_l2", "j_l1", "j_l0", "j_i1"]);
+    let reports = s
+        .list_jobs(&JobFilter {
+            kind: Some("report".into()),
+            status: Some(Status::Queued),
+            limit: 10,
+            ..JobFilter::default()
+        })
+        .unwrap();
+    assert_eq!(
+        reports.iter().map(|j| j.id.as_str()).collect::<Vec<_>>(),
+        ["j_l2", "j_l0"]
+    );
+    let page = s
+        .list_jobs(&JobFilter {
+            before_seq: Some(all[1].seq),
+            limit: 1,
+            ..JobFilter::default()
+        })
+        .unwrap();
+    assert_eq!(
+        page.iter().map(|j| j.id.as_str()).collect::<Vec<_>>(),
+        ["j_l0"]
+    );
+    assert_eq!(
+        s.jobs_with_status(Status::Queued)
+            .unwrap()
+            .iter()
+            .map(|j| j.id.as_str())
+            .collect::<Vec<_>>(),
+        ["j_l0", "j_l1", "j_l2"],
+        "oldest first"
+    );
+    // expiry: only ended jobs whose results expired
+    let expired = s.expired_jobs(1_001).unwrap();
+    assert_eq!(
+        expired.iter().map(|j| j.id.as_str()).collect::<Vec<_>>(),
+        ["j_i1"]
+    );
+    assert!(s.expired_jobs(999).unwrap().is_empty());
+    for id in ["j_i1", "j_l0", "j_l1", "j_l2"] {
+        assert!(s.delete_job(id).unwrap());
+    }
+    assert!(!s.delete_job("j_i1").unwrap());
+    assert_eq!(s.count_with_status(Status::Queued).unwrap(), 0);
 }
 
 fn claims_in_order_and_once(s: &dyn Store) {

@@ -1,14 +1,16 @@
 //! Durable state: the job and mesh index behind the [`Store`] trait and the bytes behind
 //! [`Blobs`] (uploaded meshes `meshes/{id}`, job artifacts `jobs/{id}/{name}`). The embedded
 //! default is [`SqliteStore`] (SQLite for the index, [`FileBlobs`] under the data directory);
-//! a shared database for several replicas implements the same traits and runs the same
-//! [`contract`] suite. Nothing here knows of HTTP.
+//! [`PgStore`] is the shared database for several replicas (index and blobs in PostgreSQL).
+//! Both run the same [`contract`] suite. Nothing here knows of HTTP.
 
 pub mod contract;
 mod files;
+mod postgres;
 mod sqlite;
 
 pub use files::FileBlobs;
+pub use postgres::PgStore;
 pub use sqlite::SqliteStore;
 
 use super::domain::{JobRecord, MeshRecord, Status};
@@ -141,6 +143,12 @@ pub trait Store: Blobs {
     fn requeue_expired(&self, now: i64, expires_at: i64) -> Result<Vec<JobRecord>, StoreError>;
     /// How many jobs are in state `s`.
     fn count_with_status(&self, s: Status) -> Result<usize, StoreError>;
+    /// Call `wake` whenever a job may have been queued by any process (a backend that can
+    /// push this, as PostgreSQL's LISTEN/NOTIFY, wakes idle workers at once; without it
+    /// they find work by polling).
+    fn watch_queue(&self, _wake: std::sync::Arc<dyn Fn() + Send + Sync>) -> Result<(), StoreError> {
+        Ok(())
+    }
 }
 
 /// What a heartbeat learns.

@@ -1,0 +1,745 @@
+//! The shared store: PostgreSQL for the index and the blobs, so that several replicas serve
+//! one database and the database is the one thing to back up.
+//!
+//! Driver: tokio-postgres with a deadpool pool, on a small runtime of the store's own: the
+//! [`Store`] trait is blocking (its callers are worker threads and the HTTP handlers'
+//! blocking pool), so every method is one `block_on` of one statement or one transaction.
+//! Migrations are numbered, recorded in `flatmesh_migrations` and applied at start-up under
+//! an advisory lock (replicas starting together apply each once). Blobs are `bytea` rows
+//! (one value is at most 1 GB in PostgreSQL; uploads are far below that, bounded by
+//! `--max-upload-bytes`). A queued job is announced by `NOTIFY flatmesh_jobs` in the
+//! inserting transaction; [`Store::watch_queue`] listens on a connection of its own and
+//! wakes idle workers at once (they also poll).
+
+use super::{Blobs, CancelOutcome, Inserted, JobFilter, Lease, Store, StoreError};
+use crate::service::domain::{JobError, JobRecord, MeshRecord, Status};
+use deadpool_postgres::{Manager, ManagerConfig, Pool, RecyclingMethod, Runtime};
+use std::future::Future;
+use std::sync::Arc;
+use std::time::Duration;
+use tokio_postgres::{NoTls, Row};
+
+fn backend(message: impl std::fmt::Display) -> StoreError {
+    StoreError::Backend {
+        backend: "postgres",
+        message: message.to_string(),
+    }
+}
+
+impl From<tokio_postgres::Error> for StoreError {
+    fn from(e: tokio_postgres::Error) -> StoreError {
+        // The server's own message (with its detail) rather than "db error".
+        match e.as_db_error() {
+            Some(db) => backend(format!("{}: {}", db.code().code(), db.message())),
+            None => backend(e),
+        }
+    }
+}
+
+impl From<deadpool_postgres::PoolError> for StoreError {
+    fn from(e: deadpool_postgres::PoolError) -> StoreError {
+        backend(e)
+    }
+}
+
+/// Numbered migrations, applied in order, each once.
+const MIGRATIONS: &[(i32, &str)] = &[(
+    1,
+    "
+CREATE TABLE meshes (
+  id TEXT PRIMARY KEY,
+  created_at BIGINT NOT NULL,
+  format TEXT NOT NULL,
+  size BIGINT NOT NULL,
+  sha256 TEXT NOT NULL,
+  summary TEXT NOT NULL
+);
+CREATE TABLE jobs (
+  seq BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY,
+  id TEXT NOT NULL UNIQUE,
+  kind TEXT NOT NULL,
+  mesh_id TEXT NOT NULL,
+  reference_mesh_id TEXT,
+  params TEXT NOT NULL,
+  callback_url TEXT,
+  status TEXT NOT NULL,
+  progress TEXT,
+  error TEXT,
+  created_at BIGINT NOT NULL,
+  started_at BIGINT,
+  finished_at BIGINT,
+  expires_at BIGINT,
+  attempts INTEGER NOT NULL DEFAULT 0,
+  artifacts TEXT NOT NULL DEFAULT '[]',
+  idempotency_key TEXT UNIQUE,
+  request_hash TEXT,
+  outcome TEXT,
+  worker TEXT,
+  lease_until BIGINT,
+  cancel_requested BOOLEAN NOT NULL DEFAULT FALSE
+);
+CREATE INDEX jobs_status ON jobs(status, seq);
+CREATE INDEX jobs_mesh ON jobs(mesh_id);
+CREATE INDEX jobs_ref ON jobs(reference_mesh_id);
+CREATE TABLE blobs (
+  key TEXT PRIMARY KEY,
+  bytes BYTEA NOT NULL
+);
+",
+)];
+
+const JOB_COLS: &str = "seq, id, kind, mesh_id, reference_mesh_id, params, callback_url, status, \
+    progress, error, created_at, started_at, finished_at, expires_at, attempts, artifacts, \
+    idempotency_key, request_hash, outcome";
+
+/// The channel a queued job is announced on.
+const CHANNEL: &str = "flatmesh_jobs";
+
+/// PostgreSQL index and blobs.
+pub struct PgStore {
+    /// Runs the pool's connections; `None` only while dropping.
+    rt: Option<tokio::runtime::Runtime>,
+    pool: Pool,
+    config: tokio_postgres::Config,
+}
+
+impl Drop for PgStore {
+    fn drop(&mut self) {
+        // A runtime may not be dropped (blocking) on an async thread; let it go quietly.
+        if let Some(rt) = self.rt.take() {
+            rt.shutdown_background();
+        }
+    }
+}
+
+fn json<T: serde::de::DeserializeOwned>(col: &str, s: &str) -> Result<T, StoreError> {
+    serde_json::from_str(s).map_err(|e| StoreError::Corrupt(format!("jobs.{col}: {e}")))
+}
+
+fn to_json<T: serde::Serialize>(v: &T) -> Result<String, StoreError> {
+    serde_json::to_string(v).map_err(|e| StoreError::Corrupt(e.to_string()))
+}
+
+fn job_from_row(r: &Row) -> Result<JobRecord, StoreError> {
+    let status: String = r.try_get(7)?;
+    let opt_json = |i: usize, col: &str| -> Result<Option<serde_json::Value>, StoreError> {
+        let s: Option<String> = r.try_get(i)?;
+        s.map(|s| json(col, &s)).transpose()
+    };
+    let error: Option<String> = r.try_get(9)?;
+    let attempts: i32 = r.try_get(14)?;
+    Ok(JobRecord {
+        seq: r.try_get(0)?,
+        id: r.try_get(1)?,
+        kind: r.try_get(2)?,
+        mesh_id: r.try_get(3)?,
+        reference_mesh_id: r.try_get(4)?,
+        params: json("params", &r.try_get::<_, String>(5)?)?,
+        callback_url: r.try_get(6)?,
+        status: Status::parse(&status)
+            .ok_or_else(|| StoreError::Corrupt(format!("jobs.status: {status}")))?,
+        progress: opt_json(8, "progress")?,
+        error: error.map(|e| json::<JobError>("error", &e)).transpose()?,
+        created_at: r.try_get(10)?,
+        started_at: r.try_get(11)?,
+        finished_at: r.try_get(12)?,
+        expires_at: r.try_get(13)?,
+        attempts: u32::try_from(attempts).unwrap_or(0),
+        artifacts: json("artifacts", &r.try_get::<_, String>(15)?)?,
+        idempotency_key: r.try_get(16)?,
+        request_hash: r.try_get(17)?,
+        outcome: opt_json(18, "outcome")?,
+    })
+}
+
+fn jobs_from(rows: &[Row]) -> Result<Vec<JobRecord>, StoreError> {
+    rows.iter().map(job_from_row).collect()
+}
+
+impl PgStore {
+    /// Connect to `url` (`postgres://user:pass@host:port/db`, or key=value form), with at
+    /// most `max_connections` in the pool, and apply the migrations.
+    pub fn open(url: &str, max_connections: usize) -> Result<PgStore, StoreError> {
+        let config: tokio_postgres::Config = url
+            .parse()
+            .map_err(|e| backend(format!("database URL: {e}")))?;
+        let rt = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .thread_name("flatmesh-pg")
+            .enable_all()
+            .build()
+            .map_err(|e| backend(format!("runtime: {e}")))?;
+        let manager = Manager::from_config(
+            config.clone(),
+            NoTls,
+            ManagerConfig {
+                recycling_method: RecyclingMethod::Fast,
+            },
+        );
+        let pool = Pool::builder(manager)
+            .max_size(max_connections.max(1))
+            .runtime(Runtime::Tokio1)
+            .wait_timeout(Some(Duration::from_secs(10)))
+            .create_timeout(Some(Duration::from_secs(10)))
+            .build()
+            .map_err(|e| backend(format!("pool: {e}")))?;
+        let store = PgStore {
+            rt: Some(rt),
+            pool,
+            config,
+        };
+        store.migrate()?;
+        Ok(store)
+    }
+
+    fn run<T>(&self, f: impl Future<Output = Result<T, StoreError>>) -> Result<T, StoreError> {
+        match &self.rt {
+            Some(rt) => rt.block_on(f),
+            None => Err(backend("the store is closing")),
+        }
+    }
+
+    /// Apply every migration not yet recorded, each in its own transaction, under a
+    /// transaction-scoped advisory lock so that replicas starting at once take turns.
+    fn migrate(&self) -> Result<(), StoreError> {
+        self.run(async {
+            let mut c = self.pool.get().await?;
+            for (version, sql) in MIGRATIONS {
+                let tx = c.transaction().await?;
+                // The lock first: even creating the bookkeeping table races otherwise.
+                tx.execute("SELECT pg_advisory_xact_lock(7071317)", &[])
+                    .await?;
+                tx.batch_execute(
+                    "CREATE TABLE IF NOT EXISTS flatmesh_migrations (
+                       version INTEGER PRIMARY KEY, applied_at BIGINT NOT NULL)",
+                )
+                .await?;
+                let done = tx
+                    .query_opt(
+                        "SELECT 1 FROM flatmesh_migrations WHERE version = $1",
+                        &[version],
+                    )
+                    .await?
+                    .is_some();
+                if !done {
+                    tx.batch_execute(sql).await?;
+                    tx.execute(
+                        "INSERT INTO flatmesh_migrations (version, applied_at) VALUES ($1, $2)",
+                        &[version, &crate::service::domain::now_ms()],
+                    )
+                    .await?;
+                    tracing::info!(version, "applied a database migration");
+                }
+                tx.commit().await?;
+            }
+            Ok(())
+        })
+    }
+
+    /// The migrations applied, in order (tests and diagnostics).
+    pub fn migrations(&self) -> Result<Vec<i32>, StoreError> {
+        self.run(async {
+            let c = self.pool.get().await?;
+            let rows = c
+                .query(
+                    "SELECT version FROM flatmesh_migrations ORDER BY version",
+                    &[],
+                )
+                .await?;
+            Ok(rows.iter().map(|r| r.get(0)).collect())
+        })
+    }
+
+    async fn select(
+        &self,
+        sql_where: &str,
+        args: &[&(dyn tokio_postgres::types::ToSql + Sync)],
+        tail: &str,
+    ) -> Result<Vec<JobRecord>, StoreError> {
+        let c = self.pool.get().await?;
+        let st = c
+            .prepare_cached(&format!(
+                "SELECT {JOB_COLS} FROM jobs WHERE {sql_where} {tail}"
+            ))
+            .await?;
+        jobs_from(&c.query(&st, args).await?)
+    }
+}
+
+impl Store for PgStore {
+    fn ping(&self) -> Result<(), StoreError> {
+        self.run(async {
+            self.pool.get().await?.simple_query("SELECT 1").await?;
+            Ok(())
+        })
+    }
+
+    fn insert_mesh(&self, m: &MeshRecord) -> Result<(), StoreError> {
+        self.run(async {
+            let c = self.pool.get().await?;
+            c.execute(
+                "INSERT INTO meshes (id, created_at, format, size, sha256, summary) \
+                 VALUES ($1,$2,$3,$4,$5,$6)",
+                &[
+                    &m.id,
+                    &m.created_at,
+                    &m.format,
+                    &(m.size as i64),
+                    &m.sha256,
+                    &m.summary.to_string(),
+                ],
+            )
+            .await?;
+            Ok(())
+        })
+    }
+
+    fn get_mesh(&self, id: &str) -> Result<Option<MeshRecord>, StoreError> {
+        self.run(async {
+            let c = self.pool.get().await?;
+            let st = c
+                .prepare_cached(
+                    "SELECT id, created_at, format, size, sha256, summary FROM meshes \
+                     WHERE id = $1",
+                )
+                .await?;
+            let Some(r) = c.query_opt(&st, &[&id]).await? else {
+                return Ok(None);
+            };
+            let size: i64 = r.try_get(3)?;
+            let summary: String = r.try_get(5)?;
+            Ok(Some(MeshRecord {
+                id: r.try_get(0)?,
+                created_at: r.try_get(1)?,
+                format: r.try_get(2)?,
+                size: size as u64,
+                sha256: r.try_get(4)?,
+                summary: serde_json::from_str(&summary)
+                    .map_err(|e| StoreError::Corrupt(format!("meshes.summary: {e}")))?,
+            }))
+        })
+    }
+
+    fn delete_mesh(&self, id: &str) -> Result<bool, StoreError> {
+        self.run(async {
+            let c = self.pool.get().await?;
+            Ok(c.execute("DELETE FROM meshes WHERE id = $1", &[&id])
+                .await?
+                > 0)
+        })
+    }
+
+    fn mesh_in_use(&self, id: &str) -> Result<bool, StoreError> {
+        self.run(async {
+            let c = self.pool.get().await?;
+            let r = c
+                .query_one(
+                    "SELECT EXISTS (SELECT 1 FROM jobs WHERE (mesh_id = $1 OR \
+                     reference_mesh_id = $1) AND status IN ('queued','running'))",
+                    &[&id],
+                )
+                .await?;
+            Ok(r.try_get(0)?)
+        })
+    }
+
+    fn insert_job(&self, j: &JobRecord) -> Result<Inserted, StoreError> {
+        let params = to_json(&j.params)?;
+        let error = j.error.as_ref().map(to_json).transpose()?;
+        let artifacts = to_json(&j.artifacts)?;
+        let progress = j.progress.as_ref().map(|p| p.to_string());
+        let outcome = j.outcome.as_ref().map(|p| p.to_string());
+        let attempts = j.attempts as i32;
+        self.run(async {
+            let mut c = self.pool.get().await?;
+            let tx = c.transaction().await?;
+            // ON CONFLICT: two replicas inserting one idempotency key at once both succeed,
+            // one with the new job and one with the existing.
+            let row = tx
+                .query_opt(
+                    "INSERT INTO jobs (id, kind, mesh_id, reference_mesh_id, params, \
+                     callback_url, status, progress, error, created_at, started_at, \
+                     finished_at, expires_at, attempts, artifacts, idempotency_key, \
+                     request_hash, outcome) \
+                     VALUES ($1,$2,$3,$4,$5,$6,$7,$8,$9,$10,$11,$12,$13,$14,$15,$16,$17,$18) \
+                     ON CONFLICT (idempotency_key) DO NOTHING RETURNING seq",
+                    &[
+                        &j.id,
+                        &j.kind,
+                        &j.mesh_id,
+                        &j.reference_mesh_id,
+                        &params,
+                        &j.callback_url,
+                        &j.status.as_str(),
+                        &progress,
+                        &error,
+                        &j.created_at,
+                        &j.started_at,
+                        &j.finished_at,
+                        &j.expires_at,
+                        &attempts,
+                        &artifacts,
+                        &j.idempotency_key,
+                        &j.request_hash,
+                        &outcome,
+                    ],
+                )
+                .await?;
+            let Some(row) = row else {
+                let rows = tx
+                    .query(
+                        &format!("SELECT {JOB_COLS} FROM jobs WHERE idempotency_key = $1"),
+                        &[&j.idempotency_key],
+                    )
+                    .await?;
+                let existing = jobs_from(&rows)?
+                    .pop()
+                    .ok_or_else(|| backend("idempotency key conflict without a job"))?;
+                tx.commit().await?;
+                return Ok(Inserted::Existing(existing));
+            };
+            if j.status == Status::Queued {
+                tx.execute(&format!("NOTIFY {CHANNEL}"), &[]).await?;
+            }
+            tx.commit().await?;
+            Ok(Inserted::New(JobRecord {
+                seq: row.try_get(0)?,
+                ..j.clone()
+            }))
+        })
+    }
+
+    fn find_idempotent(&self, key: &str) -> Result<Option<JobRecord>, StoreError> {
+        self.run(async {
+            Ok(self
+                .select("idempotency_key = $1", &[&key], "")
+                .await?
+                .pop())
+        })
+    }
+
+    fn get_job(&self, id: &str) -> Result<Option<JobRecord>, StoreError> {
+        self.run(async { Ok(self.select("id = $1", &[&id], "").await?.pop()) })
+    }
+
+    fn update_job(&self, j: &JobRecord) -> Result<(), StoreError> {
+        let progress = j.progress.as_ref().map(|p| p.to_string());
+        let error = j.error.as_ref().map(to_json).transpose()?;
+        let artifacts = to_json(&j.artifacts)?;
+        let outcome = j.outcome.as_ref().map(|p| p.to_string());
+        let attempts = j.attempts as i32;
+        self.run(async {
+            let c = self.pool.get().await?;
+            c.execute(
+                "UPDATE jobs SET status=$2, progress=$3, error=$4, started_at=$5, \
+                 finished_at=$6, expires_at=$7, attempts=$8, artifacts=$9, outcome=$10 \
+                 WHERE id=$1",
+                &[
+                    &j.id,
+                    &j.status.as_str(),
+                    &progress,
+                    &error,
+                    &j.started_at,
+                    &j.finished_at,
+                    &j.expires_at,
+                    &attempts,
+                    &artifacts,
+                    &outcome,
+                ],
+            )
+            .await?;
+            Ok(())
+        })
+    }
+
+    fn delete_job(&self, id: &str) -> Result<bool, StoreError> {
+        self.run(async {
+            let c = self.pool.get().await?;
+            Ok(c.execute("DELETE FROM jobs WHERE id = $1", &[&id]).await? > 0)
+        })
+    }
+
+    fn list_jobs(&self, f: &JobFilter) -> Result<Vec<JobRecord>, StoreError> {
+        let status = f.status.map(|s| s.as_str());
+        let limit = f.limit as i64;
+        self.run(async {
+            self.select(
+                "($1::TEXT IS NULL OR status = $1) AND ($2::TEXT IS NULL OR kind = $2) \
+                 AND ($3::BIGINT IS NULL OR seq < $3)",
+                &[&status, &f.kind, &f.before_seq, &limit],
+                "ORDER BY seq DESC LIMIT $4",
+            )
+            .await
+        })
+    }
+
+    fn jobs_with_status(&self, s: Status) -> Result<Vec<JobRecord>, StoreError> {
+        self.run(async {
+            self.select("status = $1", &[&s.as_str()], "ORDER BY seq ASC")
+                .await
+        })
+    }
+
+    fn expired_jobs(&self, now: i64) -> Result<Vec<JobRecord>, StoreError> {
+        self.run(async {
+            self.select(
+                "expires_at IS NOT NULL AND expires_at < $1 \
+                 AND status IN ('succeeded','failed','cancelled')",
+                &[&now],
+                "ORDER BY seq ASC",
+            )
+            .await
+        })
+    }
+
+    fn claim(
+        &self,
+        worker: &str,
+        now: i64,
+        lease_ms: i64,
+    ) -> Result<Option<JobRecord>, StoreError> {
+        self.run(async {
+            let c = self.pool.get().await?;
+            // SKIP LOCKED: replicas claiming at once take different jobs, none waits.
+            let st = c
+                .prepare_cached(&format!(
+                    "UPDATE jobs SET status='running', worker=$1, lease_until=$2::BIGINT + $3::BIGINT, \
+                     started_at=$2, attempts=attempts+1, progress=NULL, outcome=NULL, \
+                     cancel_requested=FALSE \
+                     WHERE seq = (SELECT seq FROM jobs WHERE status='queued' ORDER BY seq \
+                                  LIMIT 1 FOR UPDATE SKIP LOCKED) \
+                     RETURNING {JOB_COLS}"
+                ))
+                .await?;
+            Ok(jobs_from(&c.query(&st, &[&worker, &now, &lease_ms]).await?)?.pop())
+        })
+    }
+
+    fn heartbeat(
+        &self,
+        worker: &str,
+        id: &str,
+        now: i64,
+        lease_ms: i64,
+        progress: Option<&serde_json::Value>,
+    ) -> Result<Lease, StoreError> {
+        let progress = progress.map(|p| p.to_string());
+        self.run(async {
+            let c = self.pool.get().await?;
+            let st = c
+                .prepare_cached(
+                    "UPDATE jobs SET lease_until=$3::BIGINT + $4::BIGINT, progress=COALESCE($5, progress) \
+                     WHERE id=$1 AND worker=$2 AND status='running' RETURNING cancel_requested",
+                )
+                .await?;
+            let row = c
+                .query_opt(&st, &[&id, &worker, &now, &lease_ms, &progress])
+                .await?;
+            Ok(match row {
+                Some(r) => Lease::Held {
+                    cancel_requested: r.try_get(0)?,
+                },
+                None => Lease::Lost,
+            })
+        })
+    }
+
+    fn finish(&self, worker: &str, j: &JobRecord) -> Result<bool, StoreError> {
+        let progress = j.progress.as_ref().map(|p| p.to_string());
+        let error = j.error.as_ref().map(to_json).transpose()?;
+        let artifacts = to_json(&j.artifacts)?;
+        let outcome = j.outcome.as_ref().map(|p| p.to_string());
+        self.run(async {
+            let c = self.pool.get().await?;
+            let n = c
+                .execute(
+                    "UPDATE jobs SET status=$3, progress=$4, error=$5, finished_at=$6, \
+                     expires_at=$7, artifacts=$8, outcome=$9, worker=NULL, lease_until=NULL \
+                     WHERE id=$1 AND worker=$2 AND status='running'",
+                    &[
+                        &j.id,
+                        &worker,
+                        &j.status.as_str(),
+                        &progress,
+                        &error,
+                        &j.finished_at,
+                        &j.expires_at,
+                        &artifacts,
+                        &outcome,
+                    ],
+                )
+                .await?;
+            Ok(n == 1)
+        })
+    }
+
+    fn request_cancel(
+        &self,
+        id: &str,
+        now: i64,
+        expires_at: i64,
+    ) -> Result<CancelOutcome, StoreError> {
+        self.run(async {
+            let mut c = self.pool.get().await?;
+            let tx = c.transaction().await?;
+            let rows = tx
+                .query(
+                    &format!("SELECT {JOB_COLS} FROM jobs WHERE id = $1 FOR UPDATE"),
+                    &[&id],
+                )
+                .await?;
+            let Some(mut j) = jobs_from(&rows)?.pop() else {
+                return Ok(CancelOutcome::NotFound);
+            };
+            let out = match j.status {
+                Status::Queued => {
+                    tx.execute(
+                        "UPDATE jobs SET status='cancelled', finished_at=$2, expires_at=$3 \
+                         WHERE id=$1",
+                        &[&id, &now, &expires_at],
+                    )
+                    .await?;
+                    j.status = Status::Cancelled;
+                    j.finished_at = Some(now);
+                    j.expires_at = Some(expires_at);
+                    CancelOutcome::Cancelled(j)
+                }
+                Status::Running => {
+                    tx.execute("UPDATE jobs SET cancel_requested=TRUE WHERE id=$1", &[&id])
+                        .await?;
+                    CancelOutcome::Requested(j)
+                }
+                _ => CancelOutcome::Ended(j),
+            };
+            tx.commit().await?;
+            Ok(out)
+        })
+    }
+
+    fn requeue_expired(&self, now: i64, expires_at: i64) -> Result<Vec<JobRecord>, StoreError> {
+        self.run(async {
+            let c = self.pool.get().await?;
+            let rows = c
+                .query(
+                    &format!(
+                        "UPDATE jobs SET \
+                           status = CASE WHEN cancel_requested THEN 'cancelled' ELSE 'queued' END, \
+                           finished_at = CASE WHEN cancel_requested THEN $1::BIGINT ELSE NULL END, \
+                           expires_at = CASE WHEN cancel_requested THEN $2::BIGINT ELSE NULL END, \
+                           worker=NULL, lease_until=NULL, progress=NULL \
+                         WHERE status='running' AND (lease_until IS NULL OR lease_until < $1) \
+                         RETURNING {JOB_COLS}"
+                    ),
+                    &[&now, &expires_at],
+                )
+                .await?;
+            let back = jobs_from(&rows)?;
+            if back.iter().any(|j| j.status == Status::Queued) {
+                c.execute(&format!("NOTIFY {CHANNEL}"), &[]).await?;
+            }
+            Ok(back)
+        })
+    }
+
+    fn count_with_status(&self, s: Status) -> Result<usize, StoreError> {
+        self.run(async {
+            let c = self.pool.get().await?;
+            let st = c
+                .prepare_cached("SELECT COUNT(*) FROM jobs WHERE status = $1")
+                .await?;
+            let n: i64 = c.query_one(&st, &[&s.as_str()]).await?.try_get(0)?;
+            Ok(n as usize)
+        })
+    }
+
+    fn watch_queue(&self, wake: Arc<dyn Fn() + Send + Sync>) -> Result<(), StoreError> {
+        let Some(rt) = &self.rt else {
+            return Ok(());
+        };
+        let config = self.config.clone();
+        rt.spawn(async move {
+            // Reconnect after a lost connection; idle workers poll meanwhile.
+            loop {
+                if let Err(e) = listen(&config, &wake).await {
+                    tracing::warn!(error = %e, "queue notifications lost; reconnecting");
+                }
+                tokio::time::sleep(Duration::from_secs(1)).await;
+            }
+        });
+        Ok(())
+    }
+}
+
+/// One LISTEN session: call `wake` on every notification until the connection ends.
+async fn listen(
+    config: &tokio_postgres::Config,
+    wake: &Arc<dyn Fn() + Send + Sync>,
+) -> Result<(), tokio_postgres::Error> {
+    let (client, mut conn) = config.connect(NoTls).await?;
+    let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel();
+    let driver = tokio::spawn(async move {
+        let mut messages = futures_util::stream::poll_fn(move |cx| conn.poll_message(cx));
+        while let Some(m) = futures_util::StreamExt::next(&mut messages).await {
+            match m {
+                Ok(tokio_postgres::AsyncMessage::Notification(_)) => {
+                    if tx.send(()).is_err() {
+                        break;
+                    }
+                }
+                Ok(_) => {}
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(())
+    });
+    client.batch_execute(&format!("LISTEN {CHANNEL}")).await?;
+    while rx.recv().await.is_some() {
+        wake();
+    }
+    drop(client);
+    match driver.await {
+        Ok(r) => r,
+        Err(_) => Ok(()),
+    }
+}
+
+impl Blobs for PgStore {
+    fn put_blob(&self, key: &str, bytes: &[u8]) -> Result<(), StoreError> {
+        self.run(async {
+            let c = self.pool.get().await?;
+            c.execute(
+                "INSERT INTO blobs (key, bytes) VALUES ($1, $2) \
+                 ON CONFLICT (key) DO UPDATE SET bytes = EXCLUDED.bytes",
+                &[&key, &bytes],
+            )
+            .await?;
+            Ok(())
+        })
+    }
+
+    fn get_blob(&self, key: &str) -> Result<Option<Vec<u8>>, StoreError> {
+        self.run(async {
+            let c = self.pool.get().await?;
+            let st = c
+                .prepare_cached("SELECT bytes FROM blobs WHERE key = $1")
+                .await?;
+            Ok(match c.query_opt(&st, &[&key]).await? {
+                Some(r) => Some(r.try_get(0)?),
+                None => None,
+            })
+        })
+    }
+
+    fn delete_blobs(&self, prefix: &str) -> Result<(), StoreError> {
+        self.run(async {
+            let c = self.pool.get().await?;
+            // starts_with, not LIKE: keys contain `_`, a LIKE wildcard.
+            c.execute(
+                "DELETE FROM blobs WHERE key = $1 OR starts_with(key, $1 || '/')",
+                &[&prefix],
+            )
+            .await?;
+            Ok(())
+        })
+    }
+}

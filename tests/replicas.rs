@@ -1,0 +1,221 @@
+//! `flatmesh serve` on PostgreSQL (`--database-url`): one replica keeps everything in the
+//! database, and three replicas on one database act as one service: any replica answers
+//! for any job, a cancel sent to one stops a job running on another, and of 60 jobs
+//! submitted through all three, with one replica killed (SIGKILL) while it runs a job,
+//! every job ends once, succeeded, with the same status, attempts and results through every
+//! replica. Each test starts a throwaway PostgreSQL cluster (tests/common/pg.rs).
+
+mod common;
+
+use common::pg::PgCluster;
+use common::*;
+use serde_json::{json, Value};
+use std::time::{Duration, Instant};
+
+/// Query the test database directly (what a replica holds, what rows exist).
+async fn db(url: &str) -> tokio_postgres::Client {
+    let (client, conn) = tokio_postgres::connect(url, tokio_postgres::NoTls)
+        .await
+        .unwrap();
+    tokio::spawn(conn);
+    client
+}
+
+/// The worker holding a running job, if any.
+async fn holder(db: &tokio_postgres::Client, id: &str) -> Option<String> {
+    db.query_opt(
+        "SELECT worker FROM jobs WHERE id = $1 AND status = 'running'",
+        &[&id],
+    )
+    .await
+    .unwrap()
+    .and_then(|r| r.get(0))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn one_replica_keeps_everything_in_the_database() {
+    let Some(pg) = PgCluster::start("serve on PostgreSQL") else {
+        return;
+    };
+    let url = pg.database("one");
+    let dir = tmp("pg-one");
+    let s = Server::start(&dir, &["--database-url", &url, "--workers", "1"]);
+    let c = client();
+    let mesh = upload(&c, &s, fixture("cylinder")).await;
+    let id = submit(&c, &s, json!({"kind": "flatten", "mesh_id": mesh["id"]})).await["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let end = wait_for(&c, &s, &id, &["succeeded", "failed", "cancelled"]).await;
+    assert_eq!(end["status"], "succeeded", "{end}");
+    let result = job_result(&c, &s, &id).await;
+    assert_eq!(result["job"]["kind"], "flatten");
+    let svg = download(&c, &s, &format!("/v1/jobs/{id}/patterns?format=svg")).await;
+    assert!(String::from_utf8_lossy(&svg).contains("<svg"));
+    // Nothing but the webhook secret in the data directory: index and blobs are in the db.
+    assert!(!dir.join("flatmesh.sqlite3").exists());
+    assert!(!dir.join("blobs").exists());
+    let d = db(&url).await;
+    let n: i64 = d
+        .query_one(
+            "SELECT COUNT(*) FROM blobs WHERE starts_with(key, $1)",
+            &[&format!("jobs/{id}/")],
+        )
+        .await
+        .unwrap()
+        .get(0);
+    assert!(n >= 3, "{n} artifacts stored");
+    // Deleting the job deletes its blobs.
+    let r = c
+        .delete(s.url(&format!("/v1/jobs/{id}")))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 204);
+    let n: i64 = d
+        .query_one(
+            "SELECT COUNT(*) FROM blobs WHERE starts_with(key, $1)",
+            &[&format!("jobs/{id}/")],
+        )
+        .await
+        .unwrap()
+        .get(0);
+    assert_eq!(n, 0);
+    // A restart finds the mesh again.
+    drop(s);
+    let s = Server::start(&dir, &["--database-url", &url, "--workers", "1"]);
+    let r = c
+        .get(s.url(&format!("/v1/meshes/{}", mesh["id"].as_str().unwrap())))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+}
+
+/// A flatten that runs for about half a second and succeeds (LPFB stops at its iteration
+/// limit): long enough that a replica is killed while it holds one.
+fn medium_job(mesh: &Value) -> Value {
+    json!({"kind": "flatten", "mesh_id": mesh["id"],
+           "params": {"tolerance": 1e-300, "max_iterations": 300}})
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn three_replicas_act_as_one_service() {
+    let Some(pg) = PgCluster::start("three replicas on PostgreSQL") else {
+        return;
+    };
+    let url = pg.database("three");
+    let d = db(&url).await;
+    let args = [
+        "--database-url",
+        &url,
+        "--workers",
+        "1",
+        "--lease",
+        "1s",
+        "--job-time-limit",
+        "20s",
+    ];
+    let dirs = [tmp("pg-a"), tmp("pg-b"), tmp("pg-c")];
+    let mut reps: Vec<Server> = dirs.iter().map(|d| Server::start(d, &args)).collect();
+    let c = client();
+    // Uploaded through A, used through B and C.
+    let strip = upload(&c, &reps[0], slow_obj()).await;
+    let slow: Value = serde_json::from_str(SLOW).unwrap();
+    let slow_job = json!({"kind": "flatten", "mesh_id": strip["id"], "params": slow});
+
+    // A cancel sent to one replica stops a job running on another.
+    let id = submit(&c, &reps[1], slow_job.clone()).await["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    wait_for(&c, &reps[1], &id, &["running"]).await;
+    let w = holder(&d, &id).await.expect("a running job has a holder");
+    let other = reps
+        .iter()
+        .find(|r| !w.contains(&format!("-{}-", r.pid())))
+        .unwrap();
+    let t0 = Instant::now();
+    let r = c
+        .post(other.url(&format!("/v1/jobs/{id}/cancel")))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202);
+    let end = wait_for(&c, other, &id, &["cancelled", "failed", "succeeded"]).await;
+    assert_eq!(end["status"], "cancelled", "{end}");
+    eprintln!("cross-replica cancel took {:?}", t0.elapsed());
+
+    // 60 jobs through all three; kill one replica while it holds a job.
+    let mut ids = Vec::new();
+    for k in 0..60 {
+        let via = &reps[k % 3];
+        ids.push(
+            submit(&c, via, medium_job(&strip)).await["id"]
+                .as_str()
+                .unwrap()
+                .to_string(),
+        );
+    }
+    let victim = reps[2].pid();
+    let t0 = Instant::now();
+    let killed = loop {
+        let mut found = None;
+        for id in &ids {
+            if holder(&d, id)
+                .await
+                .is_some_and(|w| w.contains(&format!("-{victim}-")))
+            {
+                found = Some(id.clone());
+                break;
+            }
+        }
+        if let Some(id) = found {
+            break id;
+        }
+        assert!(t0.elapsed() < Duration::from_secs(60), "C never ran a job");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    };
+    reps.pop().unwrap().kill();
+    for id in &ids {
+        let end = wait_for(&c, &reps[0], id, &["succeeded", "failed", "cancelled"]).await;
+        assert_eq!(end["status"], "succeeded", "{end}");
+        let via_b = job(&c, &reps[1], id).await;
+        assert_eq!(end["status"], via_b["status"], "{id}");
+        assert_eq!(end["attempts"], via_b["attempts"], "{id}");
+        // Results are the same bytes through either replica.
+        let path = format!("/v1/jobs/{id}/result");
+        assert_eq!(
+            download(&c, &reps[0], &path).await,
+            download(&c, &reps[1], &path).await,
+            "{id}"
+        );
+    }
+    let k = job(&c, &reps[0], &killed).await;
+    assert!(
+        k["attempts"].as_u64().unwrap() >= 2,
+        "the killed replica's job ran again: {k}"
+    );
+    // Ran to the end once: exactly one finish per job in the database.
+    let unfinished: i64 = d
+        .query_one(
+            "SELECT COUNT(*) FROM jobs WHERE status <> 'succeeded' AND id = ANY($1)",
+            &[&ids],
+        )
+        .await
+        .unwrap()
+        .get(0);
+    assert_eq!(unfinished, 0);
+    // Ended once: one "job ended" line over the three replicas' logs.
+    let logs: String = dirs
+        .iter()
+        .map(|d| std::fs::read_to_string(d.join("server.log")).unwrap_or_default())
+        .collect();
+    for id in &ids {
+        let ended = logs
+            .lines()
+            .filter(|l| l.contains("job ended") && l.contains(id.as_str()))
+            .count();
+        assert_eq!(ended, 1, "{id} ended {ended} times");
+    }
+}
