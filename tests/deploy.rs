@@ -55,7 +55,10 @@ fn compose_runs_three_replicas_on_one_postgres_behind_a_balancer() {
     for r in &replicas {
         let s = &services[*r];
         let url = s["environment"]["FLATMESH_DATABASE_URL"].as_str().unwrap();
-        assert!(url.starts_with("postgres://") && url.contains("@postgres:5432/"), "{url}");
+        assert!(
+            url.starts_with("postgres://") && url.contains("@postgres:5432/"),
+            "{url}"
+        );
         assert_eq!(
             s["depends_on"]["postgres"]["condition"].as_str(),
             Some("service_healthy")
@@ -76,14 +79,21 @@ fn compose_runs_three_replicas_on_one_postgres_behind_a_balancer() {
     // The balancer's configuration names exactly the replicas, on their port.
     let conf = std::fs::read_to_string("deploy/nginx.conf").unwrap();
     for r in &replicas {
-        assert!(conf.contains(&format!("server {r}:8080")), "{r} not balanced");
+        assert!(
+            conf.contains(&format!("server {r}:8080")),
+            "{r} not balanced"
+        );
     }
     let mounted = services["balancer"]["volumes"][0].as_str().unwrap();
     assert!(mounted.starts_with("./nginx.conf:"), "{mounted}");
     let mut names = BTreeSet::new();
     env_names(doc, &mut names);
     let known = serve_env();
-    assert!(names.is_subset(&known), "unknown: {:?}", names.difference(&known));
+    assert!(
+        names.is_subset(&known),
+        "unknown: {:?}",
+        names.difference(&known)
+    );
 }
 
 #[test]
@@ -125,5 +135,9 @@ fn kubernetes_example_probes_the_real_routes_and_reads_the_database_secret() {
         env_names(d, &mut names);
     }
     let known = serve_env();
-    assert!(names.is_subset(&known), "unknown: {:?}", names.difference(&known));
+    assert!(
+        names.is_subset(&known),
+        "unknown: {:?}",
+        names.difference(&known)
+    );
 }

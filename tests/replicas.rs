@@ -94,9 +94,36 @@ async fn one_replica_keeps_everything_in_the_database() {
 
 /// A flatten that runs for about half a second and succeeds (LPFB stops at its iteration
 /// limit): long enough that a replica is killed while it holds one.
-fn medium_job(mesh: &Value) -> Value {
-    json!({"kind": "flatten", "mesh_id": mesh["id"],
+fn medium_job(mesh: &Value, hook: &str) -> Value {
+    json!({"kind": "flatten", "mesh_id": mesh["id"], "callback_url": hook,
            "params": {"tolerance": 1e-300, "max_iterations": 300}})
+}
+
+/// A webhook receiver on loopback: every POST's `webhook-id` and body, in order.
+async fn receiver() -> (
+    String,
+    std::sync::Arc<std::sync::Mutex<Vec<(String, Value)>>>,
+) {
+    let got = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+    let g = got.clone();
+    let app = axum::Router::new().route(
+        "/hook",
+        axum::routing::post(
+            move |headers: axum::http::HeaderMap, body: axum::body::Bytes| {
+                let g = g.clone();
+                async move {
+                    let id = headers["webhook-id"].to_str().unwrap().to_string();
+                    let v: Value = serde_json::from_slice(&body).unwrap();
+                    g.lock().unwrap().push((id, v));
+                    axum::http::StatusCode::NO_CONTENT
+                }
+            },
+        ),
+    );
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let url = format!("http://{}/hook", listener.local_addr().unwrap());
+    tokio::spawn(async move { axum::serve(listener, app).await });
+    (url, got)
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -106,6 +133,7 @@ async fn three_replicas_act_as_one_service() {
     };
     let url = pg.database("three");
     let d = db(&url).await;
+    let (hook, got) = receiver().await;
     let args = [
         "--database-url",
         &url,
@@ -115,6 +143,9 @@ async fn three_replicas_act_as_one_service() {
         "1s",
         "--job-time-limit",
         "20s",
+        "--allow-private-callbacks",
+        "--webhook-secret",
+        "whsec_AAECAwQFBgcICQoLDA0ODxAREhMUFRYXGBkaGxwdHh8=",
     ];
     let dirs = [tmp("pg-a"), tmp("pg-b"), tmp("pg-c")];
     let mut reps: Vec<Server> = dirs.iter().map(|d| Server::start(d, &args)).collect();
@@ -122,7 +153,8 @@ async fn three_replicas_act_as_one_service() {
     // Uploaded through A, used through B and C.
     let strip = upload(&c, &reps[0], slow_obj()).await;
     let slow: Value = serde_json::from_str(SLOW).unwrap();
-    let slow_job = json!({"kind": "flatten", "mesh_id": strip["id"], "params": slow});
+    let slow_job = json!({"kind": "flatten", "mesh_id": strip["id"], "params": slow,
+                          "callback_url": hook});
 
     // A cancel sent to one replica stops a job running on another.
     let id = submit(&c, &reps[1], slow_job.clone()).await["id"]
@@ -151,7 +183,7 @@ async fn three_replicas_act_as_one_service() {
     for k in 0..60 {
         let via = &reps[k % 3];
         ids.push(
-            submit(&c, via, medium_job(&strip)).await["id"]
+            submit(&c, via, medium_job(&strip, &hook)).await["id"]
                 .as_str()
                 .unwrap()
                 .to_string(),
@@ -206,6 +238,24 @@ async fn three_replicas_act_as_one_service() {
         .unwrap()
         .get(0);
     assert_eq!(unfinished, 0);
+    // Each job's webhook arrives once (the cancelled one's too), with its end.
+    let mut want: Vec<(String, &str)> = ids.iter().map(|i| (i.clone(), "job.succeeded")).collect();
+    want.push((id.clone(), "job.cancelled"));
+    let t0 = Instant::now();
+    while got.lock().unwrap().len() < want.len() && t0.elapsed() < Duration::from_secs(40) {
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    let hooks = got.lock().unwrap().clone();
+    for (job_id, event) in &want {
+        let mine: Vec<&(String, Value)> = hooks
+            .iter()
+            .filter(|(_, v)| v["data"]["id"].as_str() == Some(job_id.as_str()))
+            .collect();
+        assert_eq!(mine.len(), 1, "{job_id}: {} webhooks", mine.len());
+        assert_eq!(mine[0].1["type"], *event, "{job_id}");
+    }
+    assert_eq!(hooks.len(), want.len());
     // Ended once: one "job ended" line over the three replicas' logs.
     let logs: String = dirs
         .iter()

@@ -26,11 +26,14 @@ fn postgres_store_keeps_the_contract() {
     };
     let url = pg.database("contract");
     let store = PgStore::open(&url, 4).unwrap();
-    assert_eq!(store.migrations().unwrap(), [1]);
+    assert_eq!(store.migrations().unwrap(), [1, 2]);
     let open = || -> Arc<dyn Store> { Arc::new(PgStore::open(&url, 4).unwrap()) };
     flatmesh::service::store::contract::check(&store, &open);
     // Opening again applies nothing twice.
-    assert_eq!(PgStore::open(&url, 1).unwrap().migrations().unwrap(), [1]);
+    assert_eq!(
+        PgStore::open(&url, 1).unwrap().migrations().unwrap(),
+        [1, 2]
+    );
 }
 
 /// Replicas starting together on an empty database: each migration is applied once and
@@ -48,7 +51,7 @@ fn postgres_migrations_apply_once_under_concurrent_starts() {
         ts.into_iter().map(|t| t.join().unwrap()).collect()
     });
     for s in &stores {
-        assert_eq!(s.migrations().unwrap(), [1]);
+        assert_eq!(s.migrations().unwrap(), [1, 2]);
         s.ping().unwrap();
     }
 }

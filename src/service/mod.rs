@@ -99,14 +99,14 @@ async fn serve_async(cfg: Config) -> Result<(), String> {
         nice: cfg.worker_nice,
         lease: cfg.lease,
     };
-    let exec = Executor::new(store.clone(), limits, metrics.clone(), webhooks.clone())
-        .map_err(|e| e.to_string())?;
+    let exec = Executor::new(store.clone(), limits, metrics.clone()).map_err(|e| e.to_string())?;
     let ex = exec.clone();
     let (queued, cancelled) = tokio::task::spawn_blocking(move || ex.recover())
         .await
         .map_err(|e| format!("recovery: {e}"))?
         .map_err(|e| format!("recovery: {e}"))?;
     tracing::info!(queued, cancelled, workers, "store recovered");
+    webhooks.start(store.clone(), format!("{}-webhooks", exec.worker_id()));
     let st = AppState {
         store,
         exec: exec.clone(),

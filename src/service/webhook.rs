@@ -1,12 +1,14 @@
 //! Webhooks, signed as the Standard Webhooks specification says: headers `webhook-id`,
 //! `webhook-timestamp`, `webhook-signature: v1,<base64 HMAC-SHA256(secret, "{id}.{ts}.{body}")>`,
-//! where the secret is `whsec_<base64 key>`. Delivered with retries and exponential backoff;
+//! where the secret is `whsec_<base64 key>`. Sent from the store's outbox (a job's end queues
+//! its delivery in the same atomic step), with retries and exponential backoff;
 //! only http(s) targets, and private, loopback and link-local addresses are refused unless the
 //! configuration allows them (checked on submit for literal addresses and again on delivery
 //! after DNS resolution).
 
-use super::domain::{now_ms, JobRecord};
+use super::domain::now_ms;
 use super::metrics::Metrics;
+use super::store::{Delivery, Store};
 use super::views::{job_json, rfc3339};
 use base64::Engine;
 use hmac::{Hmac, Mac};
@@ -36,6 +38,13 @@ pub fn signing_key(secret: Option<&str>, data_dir: &std::path::Path) -> Result<V
     tracing::info!(path = %path.display(), "generated a webhook signing secret");
     Ok(key)
 }
+
+/// How long a sender holds a delivery: more than one attempt's timeout (10 s).
+const DELIVERY_LEASE_MS: i64 = 15_000;
+/// How often an idle sender looks at the outbox.
+const OUTBOX_POLL: Duration = Duration::from_millis(200);
+/// Most deliveries in flight per process.
+const IN_FLIGHT: usize = 16;
 
 /// Webhook sender.
 pub struct Webhooks {
@@ -158,45 +167,104 @@ impl Webhooks {
         self.allow_private
     }
 
-    /// Send the job's final state to its callback, if it has one (in the background).
-    pub fn notify(&self, job: &JobRecord) {
-        let Some(url) = job.callback_url.clone() else {
-            return;
-        };
-        let payload = serde_json::json!({
-            "type": format!("job.{}", job.status.as_str()),
-            "timestamp": rfc3339(now_ms()),
-            "data": job_json(job, None, &self.base),
-        });
-        let body = serde_json::to_vec(&payload).unwrap_or_default();
-        let msg_id = format!("msg_{}", uuid::Uuid::new_v4().simple());
-        let client = self.client.clone();
-        let key = self.key.clone();
-        let backoff = self.backoff.clone();
-        let allow_private = self.allow_private;
-        let metrics = Arc::clone(&self.metrics);
-        let job_id = job.id.clone();
+    /// Send the outbox (every process on one store shares it): claim due deliveries as
+    /// `worker`, POST each to its job's callback, and record it done, due again after the
+    /// next backoff step, or given up. A delivery whose sender died is taken by another when
+    /// its lease runs out, so every ended job's webhook is sent, once unless a sender dies
+    /// mid-request (its `webhook-id` is the same on every attempt, for receivers to dedupe).
+    pub fn start(self: &Arc<Self>, store: Arc<dyn Store>, worker: String) {
+        let me = Arc::clone(self);
         self.runtime.spawn(async move {
-            for attempt in 0..=backoff.len() {
-                if attempt > 0 {
-                    tokio::time::sleep(backoff[attempt - 1]).await;
-                }
-                match deliver(&client, &url, &key, &msg_id, &body, allow_private).await {
-                    Ok(()) => {
-                        metrics.webhook(true);
-                        tracing::info!(job = %job_id, %url, attempt, "webhook delivered");
-                        return;
+            let slots = Arc::new(tokio::sync::Semaphore::new(IN_FLIGHT));
+            loop {
+                let Ok(slot) = Arc::clone(&slots).acquire_owned().await else {
+                    return;
+                };
+                let (st, w) = (Arc::clone(&store), worker.clone());
+                let claimed = tokio::task::spawn_blocking(move || {
+                    st.claim_delivery(&w, now_ms(), DELIVERY_LEASE_MS)
+                })
+                .await;
+                match claimed {
+                    Ok(Ok(Some(d))) => {
+                        let (me, st, w) = (Arc::clone(&me), Arc::clone(&store), worker.clone());
+                        tokio::spawn(async move {
+                            me.send(st, &w, d).await;
+                            drop(slot);
+                        });
                     }
-                    Err((msg, retry)) => {
-                        tracing::warn!(job = %job_id, %url, attempt, error = %msg, "webhook failed");
-                        if !retry {
-                            break;
+                    other => {
+                        if let Ok(Err(e)) = other {
+                            tracing::warn!(error = %e, "cannot read the webhook outbox");
                         }
+                        drop(slot);
+                        tokio::time::sleep(OUTBOX_POLL).await;
                     }
                 }
             }
-            metrics.webhook(false);
         });
+    }
+
+    /// One attempt at one delivery, and its record in the store.
+    async fn send(&self, store: Arc<dyn Store>, worker: &str, d: Delivery) {
+        let st = Arc::clone(&store);
+        let job_id = d.job_id.clone();
+        let job = match tokio::task::spawn_blocking(move || st.get_job(&job_id)).await {
+            Ok(Ok(j)) => j,
+            // The store did not answer: the lease runs out and it is tried again.
+            _ => return,
+        };
+        let outcome = match job
+            .as_ref()
+            .and_then(|j| Some((j, j.callback_url.clone()?)))
+        {
+            // The job (or its callback) is gone: nothing to send.
+            None => Ok(()),
+            Some((job, url)) => {
+                let payload = serde_json::json!({
+                    "type": d.event,
+                    "timestamp": rfc3339(now_ms()),
+                    "data": job_json(job, None, &self.base),
+                });
+                let body = serde_json::to_vec(&payload).unwrap_or_default();
+                let msg_id = format!("msg_{}_{}", job.id, d.id);
+                let r = deliver(
+                    &self.client,
+                    &url,
+                    &self.key,
+                    &msg_id,
+                    &body,
+                    self.allow_private,
+                )
+                .await;
+                match &r {
+                    Ok(()) => {
+                        tracing::info!(job = %job.id, %url, attempt = d.attempts, "webhook delivered")
+                    }
+                    Err((msg, _)) => {
+                        tracing::warn!(job = %job.id, %url, attempt = d.attempts, error = %msg, "webhook failed")
+                    }
+                }
+                r.map_err(|(_, retry)| retry)
+            }
+        };
+        let next = self.backoff.get(d.attempts as usize).copied();
+        let again = match (&outcome, next) {
+            (Err(true), Some(wait)) => Some(now_ms() + wait.as_millis() as i64),
+            _ => None,
+        };
+        if again.is_none() {
+            self.metrics.webhook(outcome.is_ok());
+        }
+        let w = worker.to_string();
+        let recorded = tokio::task::spawn_blocking(move || match again {
+            Some(at) => store.retry_delivery(d.id, &w, at),
+            None => store.end_delivery(d.id, &w),
+        })
+        .await;
+        if let Ok(Err(e)) = recorded {
+            tracing::warn!(error = %e, "cannot record a webhook delivery");
+        }
     }
 }
 

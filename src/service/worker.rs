@@ -8,7 +8,6 @@ use super::domain::{now_ms, ErrorCode, JobError, JobRecord, Status};
 use super::metrics::Metrics;
 use super::store::{CancelOutcome, Lease, Store, StoreError};
 use super::views::rfc3339;
-use super::webhook::Webhooks;
 use crate::algorithms::{AlgoError, Control, Progress};
 use crate::io;
 use crate::jobs::{artifacts, Input, JobOutcome, JobSpec};
@@ -75,7 +74,6 @@ pub struct Executor {
     /// Executor limits.
     pub limits: Limits,
     metrics: Arc<Metrics>,
-    webhooks: Arc<Webhooks>,
 }
 
 /// How often an idle claim loop looks for work queued by another process.
@@ -139,9 +137,8 @@ impl Executor {
         store: Arc<dyn Store>,
         limits: Limits,
         metrics: Arc<Metrics>,
-        webhooks: Arc<Webhooks>,
     ) -> std::io::Result<Arc<Executor>> {
-        Executor::with_runner(store, limits, metrics, webhooks, JobSpec::run)
+        Executor::with_runner(store, limits, metrics, JobSpec::run)
     }
 
     /// As [`Executor::new`], running jobs with `runner`.
@@ -149,7 +146,6 @@ impl Executor {
         store: Arc<dyn Store>,
         limits: Limits,
         metrics: Arc<Metrics>,
-        webhooks: Arc<Webhooks>,
         runner: Runner,
     ) -> std::io::Result<Arc<Executor>> {
         let nice = limits.nice;
@@ -179,7 +175,6 @@ impl Executor {
             running: AtomicUsize::new(0),
             limits,
             metrics,
-            webhooks,
         });
         for k in 0..workers {
             let me = Arc::clone(&exec);
@@ -202,6 +197,11 @@ impl Executor {
             tracing::warn!(error = %e, "no queue notifications; idle workers poll");
         }
         Ok(exec)
+    }
+
+    /// This process's worker id prefix (`host-pid-random`).
+    pub fn worker_id(&self) -> &str {
+        &self.worker
     }
 
     /// Jobs waiting for a worker, in the store (all processes).
@@ -265,7 +265,6 @@ impl Executor {
             if j.status == Status::Cancelled {
                 cancelled += 1;
                 self.metrics.finished(Status::Cancelled);
-                self.webhooks.notify(j);
             } else {
                 tracing::warn!(job = %j.id, attempts = j.attempts, "lease ran out; job queued again");
             }
@@ -298,7 +297,6 @@ impl Executor {
                 CancelOutcome::Cancelled(j) => {
                     self.metrics.finished(Status::Cancelled);
                     self.metrics.set_queued(self.queued());
-                    self.webhooks.notify(&j);
                     Some(Ok(j))
                 }
                 CancelOutcome::Requested(j) => {
@@ -394,7 +392,6 @@ impl Executor {
             ));
             if let Ok(true) = self.store.finish(worker, &job) {
                 self.metrics.finished(Status::Failed);
-                self.webhooks.notify(&job);
             }
             return;
         }
@@ -457,7 +454,6 @@ impl Executor {
         self.metrics.finished(status);
         self.metrics.job_seconds(seconds);
         tracing::info!(job = %id, status = status.as_str(), seconds, "job ended");
-        self.webhooks.notify(&job);
     }
 
     /// Status, error, artifacts and outcome of a run.
@@ -666,16 +662,7 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("flatmesh-exec-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         let store: Arc<dyn Store> = Arc::new(SqliteStore::open(&dir).unwrap());
-        let rt = tokio::runtime::Builder::new_current_thread()
-            .build()
-            .unwrap();
         let metrics = Arc::new(Metrics::default());
-        let hooks = Arc::new(Webhooks::new(
-            vec![1; 32],
-            false,
-            rt.handle().clone(),
-            metrics.clone(),
-        ));
         let limits = Limits {
             workers: 1,
             max_queued: 4,
@@ -685,7 +672,7 @@ mod tests {
             nice: 10,
             lease: Duration::from_secs(5),
         };
-        let exec = Executor::with_runner(store.clone(), limits, metrics, hooks, runner).unwrap();
+        let exec = Executor::with_runner(store.clone(), limits, metrics, runner).unwrap();
         let obj = std::fs::read("fixtures/flat_disk.obj").unwrap();
         store.put_blob("meshes/m1", &obj).unwrap();
         store

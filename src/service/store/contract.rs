@@ -4,7 +4,7 @@
 //! second handle on the same store, as a second process would have, so that "exactly once"
 //! is checked across handles.
 
-use super::{CancelOutcome, Inserted, JobFilter, Lease, Store};
+use super::{CancelOutcome, Delivery, Inserted, JobFilter, Lease, Store};
 use crate::service::domain::{JobRecord, MeshRecord, Status};
 use std::collections::HashSet;
 use std::sync::Arc;
@@ -28,6 +28,7 @@ pub fn check(store: &dyn Store, open: &dyn Fn() -> Arc<dyn Store>) {
     heartbeats_and_cancels(store);
     expired_leases_requeue(store);
     concurrent_claims_are_exclusive(store, open);
+    webhook_outbox(store, open);
 }
 
 fn meshes_and_blobs(s: &dyn Store) {
@@ -348,4 +349,116 @@ fn concurrent_claims_are_exclusive(s: &dyn Store, open: &dyn Fn() -> Arc<dyn Sto
     let unique: HashSet<&String> = all.iter().copied().collect();
     assert_eq!(all.len(), n, "every job claimed");
     assert_eq!(unique.len(), n, "no job claimed twice");
+}
+
+fn with_callback(id: &str) -> JobRecord {
+    let mut j = queued(id);
+    j.callback_url = Some("https://example.com/hook".into());
+    j
+}
+
+fn drain(s: &dyn Store, now: i64) -> Vec<Delivery> {
+    let mut out = Vec::new();
+    while let Some(d) = s.claim_delivery("drain", now, LEASE).unwrap() {
+        assert!(s.end_delivery(d.id, "drain").unwrap());
+        out.push(d);
+    }
+    out
+}
+
+/// Every step that ends a job with a callback queues one delivery, atomically; deliveries
+/// are claimed under a lease like jobs, retried when asked, and ended once.
+fn webhook_outbox(s: &dyn Store, open: &dyn Fn() -> Arc<dyn Store>) {
+    assert!(
+        drain(s, i64::MAX / 4).is_empty(),
+        "no job with a callback has ended yet"
+    );
+    // finish: one delivery with the end's event; none for a job without a callback
+    s.insert_job(&with_callback("j_w1")).unwrap();
+    s.insert_job(&queued("j_w2")).unwrap();
+    for w in ["w1", "w2"] {
+        let mut j = s.claim(w, 100, LEASE).unwrap().unwrap();
+        j.status = Status::Succeeded;
+        j.finished_at = Some(200);
+        assert!(s.finish(w, &j).unwrap());
+    }
+    assert!(
+        s.claim_delivery("h1", 199, LEASE).unwrap().is_none(),
+        "not due before the job ended"
+    );
+    let d = s
+        .claim_delivery("h1", 300, LEASE)
+        .unwrap()
+        .expect("one delivery");
+    assert_eq!(
+        (d.job_id.as_str(), d.event.as_str(), d.attempts),
+        ("j_w1", "job.succeeded", 0)
+    );
+    // leased: nobody else takes it, nor ends it
+    assert!(s.claim_delivery("h2", 300, LEASE).unwrap().is_none());
+    assert!(!s.end_delivery(d.id, "h2").unwrap());
+    // retried: not due before its time, then due with one attempt counted
+    assert!(s.retry_delivery(d.id, "h1", 5_000).unwrap());
+    assert!(!s.retry_delivery(d.id, "h1", 5_000).unwrap(), "released");
+    assert!(s.claim_delivery("h2", 4_999, LEASE).unwrap().is_none());
+    let d2 = s.claim_delivery("h2", 5_000, LEASE).unwrap().unwrap();
+    assert_eq!((d2.id, d2.attempts), (d.id, 1));
+    // a sender that dies: after its lease another takes it, and the dead one cannot end it
+    let d3 = s
+        .claim_delivery("h3", 5_000 + LEASE + 1, LEASE)
+        .unwrap()
+        .expect("lease ran out");
+    assert_eq!(d3.id, d.id);
+    assert!(!s.end_delivery(d.id, "h2").unwrap());
+    assert!(s.end_delivery(d.id, "h3").unwrap());
+    assert!(
+        drain(s, i64::MAX / 4).is_empty(),
+        "a finish queues one delivery"
+    );
+    // a queued job cancelled, and a running one whose worker died after a cancel request
+    s.insert_job(&with_callback("j_w3")).unwrap();
+    s.insert_job(&with_callback("j_w4")).unwrap();
+    s.request_cancel("j_w3", 400, 9_999).unwrap();
+    let j4 = s.claim("w4", 400, LEASE).unwrap().unwrap();
+    assert_eq!(j4.id, "j_w4");
+    s.request_cancel("j_w4", 410, 9_999).unwrap();
+    assert!(
+        drain(s, i64::MAX / 4).iter().all(|d| d.job_id == "j_w3"),
+        "a running job's cancel request is not its end"
+    );
+    s.requeue_expired(400 + LEASE + 1, 9_999).unwrap();
+    let ended: Vec<(String, String)> = drain(s, i64::MAX / 4)
+        .into_iter()
+        .map(|d| (d.job_id, d.event))
+        .collect();
+    assert_eq!(ended, [("j_w4".to_string(), "job.cancelled".to_string())]);
+    // claims from several handles at once take each delivery once
+    let n = 20;
+    for k in 0..n {
+        let id = format!("j_wd{k:02}");
+        s.insert_job(&with_callback(&id)).unwrap();
+        s.request_cancel(&id, 500, 9_999).unwrap();
+    }
+    let handles: Vec<Arc<dyn Store>> = (0..4).map(|_| open()).collect();
+    let got: Vec<Vec<i64>> = std::thread::scope(|sc| {
+        let ts: Vec<_> = handles
+            .iter()
+            .enumerate()
+            .map(|(w, h)| {
+                sc.spawn(move || {
+                    let me = format!("h{w}");
+                    let mut mine = Vec::new();
+                    while let Some(d) = h.claim_delivery(&me, 600, LEASE).unwrap() {
+                        assert!(h.end_delivery(d.id, &me).unwrap());
+                        mine.push(d.id);
+                    }
+                    mine
+                })
+            })
+            .collect();
+        ts.into_iter().map(|t| t.join().unwrap()).collect()
+    });
+    let all: Vec<i64> = got.into_iter().flatten().collect();
+    let unique: HashSet<i64> = all.iter().copied().collect();
+    assert_eq!((all.len(), unique.len()), (n, n), "each delivery once");
 }

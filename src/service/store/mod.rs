@@ -129,6 +129,10 @@ pub trait Store: Blobs {
     ) -> Result<Lease, StoreError>;
     /// Record the end of a job `worker` holds (status, error, artifacts, outcome, times from
     /// `j`); false, and nothing written, when it no longer holds it.
+    ///
+    /// Every step that ends a job (this, the cancel of a queued job, an expired lease with a
+    /// cancel requested) also queues one webhook [`Delivery`] when the job has a callback,
+    /// in the same atomic step: a process that dies right after cannot lose it.
     fn finish(&self, worker: &str, j: &JobRecord) -> Result<bool, StoreError>;
     /// Cancel job `id`: a queued job ends cancelled at once (results kept until
     /// `expires_at`), a running one is flagged for its worker's next heartbeat.
@@ -143,12 +147,38 @@ pub trait Store: Blobs {
     fn requeue_expired(&self, now: i64, expires_at: i64) -> Result<Vec<JobRecord>, StoreError>;
     /// How many jobs are in state `s`.
     fn count_with_status(&self, s: Status) -> Result<usize, StoreError>;
+    /// Take the oldest due webhook delivery for `worker`, leased until `now + lease_ms` (a
+    /// sender that dies leaves it to another after that).
+    fn claim_delivery(
+        &self,
+        worker: &str,
+        now: i64,
+        lease_ms: i64,
+    ) -> Result<Option<Delivery>, StoreError>;
+    /// A delivery `worker` holds is done (delivered, or given up): remove it. False when it
+    /// no longer holds it.
+    fn end_delivery(&self, id: i64, worker: &str) -> Result<bool, StoreError>;
+    /// A delivery `worker` holds failed: try again at `due_at`, one more attempt counted.
+    fn retry_delivery(&self, id: i64, worker: &str, due_at: i64) -> Result<bool, StoreError>;
     /// Call `wake` whenever a job may have been queued by any process (a backend that can
     /// push this, as PostgreSQL's LISTEN/NOTIFY, wakes idle workers at once; without it
     /// they find work by polling).
     fn watch_queue(&self, _wake: std::sync::Arc<dyn Fn() + Send + Sync>) -> Result<(), StoreError> {
         Ok(())
     }
+}
+
+/// A webhook call waiting in the outbox: job `job_id` ended as `event` (`job.succeeded`, …).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Delivery {
+    /// Outbox row id (the webhook id is made from it, the same on every attempt).
+    pub id: i64,
+    /// The job.
+    pub job_id: String,
+    /// `job.<status>`.
+    pub event: String,
+    /// Attempts made before this claim.
+    pub attempts: u32,
 }
 
 /// What a heartbeat learns.

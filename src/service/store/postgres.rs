@@ -11,7 +11,7 @@
 //! inserting transaction; [`Store::watch_queue`] listens on a connection of its own and
 //! wakes idle workers at once (they also poll).
 
-use super::{Blobs, CancelOutcome, Inserted, JobFilter, Lease, Store, StoreError};
+use super::{Blobs, CancelOutcome, Delivery, Inserted, JobFilter, Lease, Store, StoreError};
 use crate::service::domain::{JobError, JobRecord, MeshRecord, Status};
 use deadpool_postgres::{Manager, ManagerConfig, Pool, RecyclingMethod, Runtime};
 use std::future::Future;
@@ -43,9 +43,10 @@ impl From<deadpool_postgres::PoolError> for StoreError {
 }
 
 /// Numbered migrations, applied in order, each once.
-const MIGRATIONS: &[(i32, &str)] = &[(
-    1,
-    "
+const MIGRATIONS: &[(i32, &str)] = &[
+    (
+        1,
+        "
 CREATE TABLE meshes (
   id TEXT PRIMARY KEY,
   created_at BIGINT NOT NULL,
@@ -86,7 +87,23 @@ CREATE TABLE blobs (
   bytes BYTEA NOT NULL
 );
 ",
-)];
+    ),
+    (
+        2,
+        "
+CREATE TABLE deliveries (
+  id BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY,
+  job_id TEXT NOT NULL,
+  event TEXT NOT NULL,
+  due_at BIGINT NOT NULL,
+  attempts INTEGER NOT NULL DEFAULT 0,
+  worker TEXT,
+  lease_until BIGINT
+);
+CREATE INDEX deliveries_due ON deliveries(due_at, id);
+",
+    ),
+];
 
 const JOB_COLS: &str = "seq, id, kind, mesh_id, reference_mesh_id, params, callback_url, status, \
     progress, error, created_at, started_at, finished_at, expires_at, attempts, artifacts, \
@@ -150,6 +167,22 @@ fn job_from_row(r: &Row) -> Result<JobRecord, StoreError> {
         request_hash: r.try_get(17)?,
         outcome: opt_json(18, "outcome")?,
     })
+}
+
+/// Queue the webhook of job `id`, which has just ended, when it has a callback (inside the
+/// transaction that ended it).
+async fn queue_delivery(
+    tx: &deadpool_postgres::Transaction<'_>,
+    id: &str,
+    due_at: i64,
+) -> Result<(), StoreError> {
+    tx.execute(
+        "INSERT INTO deliveries (job_id, event, due_at) \
+         SELECT id, 'job.' || status, $2 FROM jobs WHERE id = $1 AND callback_url IS NOT NULL",
+        &[&id, &due_at],
+    )
+    .await?;
+    Ok(())
 }
 
 fn jobs_from(rows: &[Row]) -> Result<Vec<JobRecord>, StoreError> {
@@ -550,8 +583,9 @@ impl Store for PgStore {
         let artifacts = to_json(&j.artifacts)?;
         let outcome = j.outcome.as_ref().map(|p| p.to_string());
         self.run(async {
-            let c = self.pool.get().await?;
-            let n = c
+            let mut c = self.pool.get().await?;
+            let tx = c.transaction().await?;
+            let n = tx
                 .execute(
                     "UPDATE jobs SET status=$3, progress=$4, error=$5, finished_at=$6, \
                      expires_at=$7, artifacts=$8, outcome=$9, worker=NULL, lease_until=NULL \
@@ -569,6 +603,10 @@ impl Store for PgStore {
                     ],
                 )
                 .await?;
+            if n == 1 {
+                queue_delivery(&tx, &j.id, j.finished_at.unwrap_or(0)).await?;
+            }
+            tx.commit().await?;
             Ok(n == 1)
         })
     }
@@ -599,6 +637,7 @@ impl Store for PgStore {
                         &[&id, &now, &expires_at],
                     )
                     .await?;
+                    queue_delivery(&tx, id, now).await?;
                     j.status = Status::Cancelled;
                     j.finished_at = Some(now);
                     j.expires_at = Some(expires_at);
@@ -618,8 +657,9 @@ impl Store for PgStore {
 
     fn requeue_expired(&self, now: i64, expires_at: i64) -> Result<Vec<JobRecord>, StoreError> {
         self.run(async {
-            let c = self.pool.get().await?;
-            let rows = c
+            let mut c = self.pool.get().await?;
+            let tx = c.transaction().await?;
+            let rows = tx
                 .query(
                     &format!(
                         "UPDATE jobs SET \
@@ -634,10 +674,71 @@ impl Store for PgStore {
                 )
                 .await?;
             let back = jobs_from(&rows)?;
-            if back.iter().any(|j| j.status == Status::Queued) {
-                c.execute(&format!("NOTIFY {CHANNEL}"), &[]).await?;
+            for j in back.iter().filter(|j| j.status == Status::Cancelled) {
+                queue_delivery(&tx, &j.id, now).await?;
             }
+            if back.iter().any(|j| j.status == Status::Queued) {
+                tx.execute(&format!("NOTIFY {CHANNEL}"), &[]).await?;
+            }
+            tx.commit().await?;
             Ok(back)
+        })
+    }
+
+    fn claim_delivery(
+        &self,
+        worker: &str,
+        now: i64,
+        lease_ms: i64,
+    ) -> Result<Option<Delivery>, StoreError> {
+        self.run(async {
+            let c = self.pool.get().await?;
+            let st = c
+                .prepare_cached(
+                    "UPDATE deliveries SET worker=$1, lease_until=$2::BIGINT + $3::BIGINT \
+                     WHERE id = (SELECT id FROM deliveries WHERE due_at <= $2 \
+                                 AND (lease_until IS NULL OR lease_until < $2) \
+                                 ORDER BY due_at, id LIMIT 1 FOR UPDATE SKIP LOCKED) \
+                     RETURNING id, job_id, event, attempts",
+                )
+                .await?;
+            let Some(r) = c.query_opt(&st, &[&worker, &now, &lease_ms]).await? else {
+                return Ok(None);
+            };
+            let attempts: i32 = r.try_get(3)?;
+            Ok(Some(Delivery {
+                id: r.try_get(0)?,
+                job_id: r.try_get(1)?,
+                event: r.try_get(2)?,
+                attempts: u32::try_from(attempts).unwrap_or(0),
+            }))
+        })
+    }
+
+    fn end_delivery(&self, id: i64, worker: &str) -> Result<bool, StoreError> {
+        self.run(async {
+            let c = self.pool.get().await?;
+            let n = c
+                .execute(
+                    "DELETE FROM deliveries WHERE id = $1 AND worker = $2",
+                    &[&id, &worker],
+                )
+                .await?;
+            Ok(n == 1)
+        })
+    }
+
+    fn retry_delivery(&self, id: i64, worker: &str, due_at: i64) -> Result<bool, StoreError> {
+        self.run(async {
+            let c = self.pool.get().await?;
+            let n = c
+                .execute(
+                    "UPDATE deliveries SET attempts = attempts + 1, due_at = $3, worker = NULL, \
+                     lease_until = NULL WHERE id = $1 AND worker = $2",
+                    &[&id, &worker, &due_at],
+                )
+                .await?;
+            Ok(n == 1)
         })
     }
 

@@ -2,7 +2,9 @@
 //! as files beside it ([`FileBlobs`]). Every coordination step is one statement or one
 //! IMMEDIATE transaction, so several processes may share the directory.
 
-use super::{Blobs, CancelOutcome, FileBlobs, Inserted, JobFilter, Lease, Store, StoreError};
+use super::{
+    Blobs, CancelOutcome, Delivery, FileBlobs, Inserted, JobFilter, Lease, Store, StoreError,
+};
 use crate::service::domain::{JobRecord, MeshRecord, Status};
 use rusqlite::{params, Connection, OptionalExtension};
 use std::path::Path;
@@ -61,6 +63,16 @@ CREATE TABLE IF NOT EXISTS jobs (
   request_hash TEXT,
   outcome TEXT
 );
+CREATE TABLE IF NOT EXISTS deliveries (
+  id INTEGER PRIMARY KEY AUTOINCREMENT,
+  job_id TEXT NOT NULL,
+  event TEXT NOT NULL,
+  due_at INTEGER NOT NULL,
+  attempts INTEGER NOT NULL DEFAULT 0,
+  worker TEXT,
+  lease_until INTEGER
+);
+CREATE INDEX IF NOT EXISTS deliveries_due ON deliveries(due_at, id);
 CREATE INDEX IF NOT EXISTS jobs_status ON jobs(status, seq);
 CREATE INDEX IF NOT EXISTS jobs_mesh ON jobs(mesh_id);
 CREATE INDEX IF NOT EXISTS jobs_ref ON jobs(reference_mesh_id);
@@ -216,6 +228,16 @@ impl SqliteStore {
         let rows = st.query_map(args, job_from_row)?;
         Ok(rows.collect::<Result<Vec<_>, _>>()?)
     }
+}
+
+/// Queue the webhook of job `id`, which has just ended, when it has a callback.
+fn queue_delivery(c: &Connection, id: &str, due_at: i64) -> rusqlite::Result<()> {
+    c.prepare_cached(
+        "INSERT INTO deliveries (job_id, event, due_at) \
+         SELECT id, 'job.' || status, ?2 FROM jobs WHERE id = ?1 AND callback_url IS NOT NULL",
+    )?
+    .execute(params![id, due_at])?;
+    Ok(())
 }
 
 /// One job by its primary key.
@@ -455,7 +477,9 @@ impl Store for SqliteStore {
     }
 
     fn finish(&self, worker: &str, j: &JobRecord) -> Result<bool, StoreError> {
-        let n = self.conn().execute(
+        let mut c = self.conn();
+        let tx = c.transaction_with_behavior(rusqlite::TransactionBehavior::Immediate)?;
+        let n = tx.execute(
             "UPDATE jobs SET status=?3, progress=?4, error=?5, finished_at=?6, expires_at=?7, \
              artifacts=?8, outcome=?9, worker=NULL, lease_until=NULL \
              WHERE id=?1 AND worker=?2 AND status='running'",
@@ -475,6 +499,10 @@ impl Store for SqliteStore {
                 j.outcome.as_ref().map(|o| o.to_string()),
             ],
         )?;
+        if n == 1 {
+            queue_delivery(&tx, &j.id, j.finished_at.unwrap_or(0))?;
+        }
+        tx.commit()?;
         Ok(n == 1)
     }
 
@@ -495,6 +523,7 @@ impl Store for SqliteStore {
                     "UPDATE jobs SET status='cancelled', finished_at=?2, expires_at=?3 WHERE id=?1",
                     params![id, now, expires_at],
                 )?;
+                queue_delivery(&tx, id, now)?;
                 j.status = Status::Cancelled;
                 j.finished_at = Some(now);
                 j.expires_at = Some(expires_at);
@@ -511,18 +540,67 @@ impl Store for SqliteStore {
     }
 
     fn requeue_expired(&self, now: i64, expires_at: i64) -> Result<Vec<JobRecord>, StoreError> {
+        let mut c = self.conn();
+        let tx = c.transaction_with_behavior(rusqlite::TransactionBehavior::Immediate)?;
+        let back = {
+            let mut st = tx.prepare_cached(&format!(
+                "UPDATE jobs SET \
+                   status = CASE WHEN cancel_requested = 1 THEN 'cancelled' ELSE 'queued' END, \
+                   finished_at = CASE WHEN cancel_requested = 1 THEN ?1 ELSE NULL END, \
+                   expires_at = CASE WHEN cancel_requested = 1 THEN ?2 ELSE NULL END, \
+                   worker=NULL, lease_until=NULL, progress=NULL \
+                 WHERE status='running' AND (lease_until IS NULL OR lease_until < ?1) \
+                 RETURNING {JOB_COLS}"
+            ))?;
+            let rows = st.query_map(params![now, expires_at], job_from_row)?;
+            rows.collect::<Result<Vec<_>, _>>()?
+        };
+        for j in back.iter().filter(|j| j.status == Status::Cancelled) {
+            queue_delivery(&tx, &j.id, now)?;
+        }
+        tx.commit()?;
+        Ok(back)
+    }
+
+    fn claim_delivery(
+        &self,
+        worker: &str,
+        now: i64,
+        lease_ms: i64,
+    ) -> Result<Option<Delivery>, StoreError> {
         let c = self.conn();
-        let mut st = c.prepare_cached(&format!(
-            "UPDATE jobs SET \
-               status = CASE WHEN cancel_requested = 1 THEN 'cancelled' ELSE 'queued' END, \
-               finished_at = CASE WHEN cancel_requested = 1 THEN ?1 ELSE NULL END, \
-               expires_at = CASE WHEN cancel_requested = 1 THEN ?2 ELSE NULL END, \
-               worker=NULL, lease_until=NULL, progress=NULL \
-             WHERE status='running' AND (lease_until IS NULL OR lease_until < ?1) \
-             RETURNING {JOB_COLS}"
-        ))?;
-        let rows = st.query_map(params![now, expires_at], job_from_row)?;
-        Ok(rows.collect::<Result<Vec<_>, _>>()?)
+        let mut st = c.prepare_cached(
+            "UPDATE deliveries SET worker=?1, lease_until=?2 + ?3 \
+             WHERE id = (SELECT id FROM deliveries WHERE due_at <= ?2 \
+                         AND (lease_until IS NULL OR lease_until < ?2) \
+                         ORDER BY due_at, id LIMIT 1) \
+             RETURNING id, job_id, event, attempts",
+        )?;
+        Ok(st
+            .query_row(params![worker, now, lease_ms], |r| {
+                Ok(Delivery {
+                    id: r.get(0)?,
+                    job_id: r.get(1)?,
+                    event: r.get(2)?,
+                    attempts: r.get(3)?,
+                })
+            })
+            .optional()?)
+    }
+
+    fn end_delivery(&self, id: i64, worker: &str) -> Result<bool, StoreError> {
+        Ok(self.conn().execute(
+            "DELETE FROM deliveries WHERE id = ?1 AND worker = ?2",
+            params![id, worker],
+        )? == 1)
+    }
+
+    fn retry_delivery(&self, id: i64, worker: &str, due_at: i64) -> Result<bool, StoreError> {
+        Ok(self.conn().execute(
+            "UPDATE deliveries SET attempts = attempts + 1, due_at = ?3, worker = NULL, \
+             lease_until = NULL WHERE id = ?1 AND worker = ?2",
+            params![id, worker, due_at],
+        )? == 1)
     }
 
     fn count_with_status(&self, s: Status) -> Result<usize, StoreError> {
