@@ -99,11 +99,12 @@ fn medium_job(mesh: &Value, hook: &str) -> Value {
            "params": {"tolerance": 1e-300, "max_iterations": 300}})
 }
 
-/// A webhook receiver on loopback: every POST's `webhook-id` and body, in order.
-async fn receiver() -> (
-    String,
-    std::sync::Arc<std::sync::Mutex<Vec<(String, Value)>>>,
-) {
+/// One received webhook: the signed content `id.timestamp.body`, the signature header, and
+/// the body.
+type Hook = (String, String, Value);
+
+/// A webhook receiver on loopback: every POST, in order.
+async fn receiver() -> (String, std::sync::Arc<std::sync::Mutex<Vec<Hook>>>) {
     let got = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
     let g = got.clone();
     let app = axum::Router::new().route(
@@ -112,9 +113,15 @@ async fn receiver() -> (
             move |headers: axum::http::HeaderMap, body: axum::body::Bytes| {
                 let g = g.clone();
                 async move {
-                    let id = headers["webhook-id"].to_str().unwrap().to_string();
+                    let h = |k: &str| headers[k].to_str().unwrap().to_string();
+                    let signed = format!(
+                        "{}.{}.{}",
+                        h("webhook-id"),
+                        h("webhook-timestamp"),
+                        String::from_utf8_lossy(&body)
+                    );
                     let v: Value = serde_json::from_slice(&body).unwrap();
-                    g.lock().unwrap().push((id, v));
+                    g.lock().unwrap().push((signed, h("webhook-signature"), v));
                     axum::http::StatusCode::NO_CONTENT
                 }
             },
@@ -144,8 +151,6 @@ async fn three_replicas_act_as_one_service() {
         "--job-time-limit",
         "20s",
         "--allow-private-callbacks",
-        "--webhook-secret",
-        "whsec_AAECAwQFBgcICQoLDA0ODxAREhMUFRYXGBkaGxwdHh8=",
     ];
     let dirs = [tmp("pg-a"), tmp("pg-b"), tmp("pg-c")];
     let mut reps: Vec<Server> = dirs.iter().map(|d| Server::start(d, &args)).collect();
@@ -248,14 +253,35 @@ async fn three_replicas_act_as_one_service() {
     tokio::time::sleep(Duration::from_millis(500)).await;
     let hooks = got.lock().unwrap().clone();
     for (job_id, event) in &want {
-        let mine: Vec<&(String, Value)> = hooks
+        let mine: Vec<&Hook> = hooks
             .iter()
-            .filter(|(_, v)| v["data"]["id"].as_str() == Some(job_id.as_str()))
+            .filter(|(_, _, v)| v["data"]["id"].as_str() == Some(job_id.as_str()))
             .collect();
         assert_eq!(mine.len(), 1, "{job_id}: {} webhooks", mine.len());
-        assert_eq!(mine[0].1["type"], *event, "{job_id}");
+        assert_eq!(mine[0].2["type"], *event, "{job_id}");
     }
     assert_eq!(hooks.len(), want.len());
+    // No secret was given: the replicas share the one the first stored, and every
+    // signature, whichever replica sent it, verifies with it.
+    let secret: String = d
+        .query_one(
+            "SELECT value FROM settings WHERE key = 'webhook_secret'",
+            &[],
+        )
+        .await
+        .unwrap()
+        .get(0);
+    let key = flatmesh::service::webhook::decode_secret(&secret).unwrap();
+    for (signed, sig, _) in &hooks {
+        use hmac::Mac;
+        let mut mac = hmac::Hmac::<sha2::Sha256>::new_from_slice(&key).unwrap();
+        mac.update(signed.as_bytes());
+        let want = base64::Engine::encode(
+            &base64::engine::general_purpose::STANDARD,
+            mac.finalize().into_bytes(),
+        );
+        assert_eq!(sig, &format!("v1,{want}"));
+    }
     // Ended once: one "job ended" line over the three replicas' logs.
     let logs: String = dirs
         .iter()

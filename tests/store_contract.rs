@@ -26,13 +26,28 @@ fn postgres_store_keeps_the_contract() {
     };
     let url = pg.database("contract");
     let store = PgStore::open(&url, 4).unwrap();
-    assert_eq!(store.migrations().unwrap(), [1, 2]);
+    assert_eq!(store.migrations().unwrap(), [1, 2, 3]);
     let open = || -> Arc<dyn Store> { Arc::new(PgStore::open(&url, 4).unwrap()) };
     flatmesh::service::store::contract::check(&store, &open);
+    // The webhook secret: the first to ask sets it, every handle gets the same.
+    assert_eq!(
+        store
+            .shared_webhook_secret("whsec_first")
+            .unwrap()
+            .as_deref(),
+        Some("whsec_first")
+    );
+    assert_eq!(
+        open()
+            .shared_webhook_secret("whsec_second")
+            .unwrap()
+            .as_deref(),
+        Some("whsec_first")
+    );
     // Opening again applies nothing twice.
     assert_eq!(
         PgStore::open(&url, 1).unwrap().migrations().unwrap(),
-        [1, 2]
+        [1, 2, 3]
     );
 }
 
@@ -51,7 +66,7 @@ fn postgres_migrations_apply_once_under_concurrent_starts() {
         ts.into_iter().map(|t| t.join().unwrap()).collect()
     });
     for s in &stores {
-        assert_eq!(s.migrations().unwrap(), [1, 2]);
+        assert_eq!(s.migrations().unwrap(), [1, 2, 3]);
         s.ping().unwrap();
     }
 }

@@ -86,7 +86,8 @@ pub struct Config {
     )]
     pub cors_origins: Vec<String>,
     /// Webhook signing secret `whsec_<base64>`; without it one is generated and kept in the
-    /// data directory (`webhook_secret`).
+    /// data directory (`webhook_secret`), or with `--database-url` in the database, shared
+    /// by every replica.
     #[arg(long, env = "FLATMESH_WEBHOOK_SECRET", hide_env_values = true)]
     pub webhook_secret: Option<String>,
     /// Allow webhooks to private, loopback and link-local addresses.

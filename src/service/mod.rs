@@ -77,8 +77,18 @@ async fn serve_async(cfg: Config) -> Result<(), String> {
         .map_err(|e| format!("cannot create {}: {e}", cfg.data_dir.display()))?;
     let store = open_store(&cfg).await?;
     let metrics = Arc::new(Metrics::default());
+    let (given, st, dir) = (
+        cfg.webhook_secret.clone(),
+        store.clone(),
+        cfg.data_dir.clone(),
+    );
+    let key = tokio::task::spawn_blocking(move || {
+        webhook::signing_key(given.as_deref(), st.as_ref(), &dir)
+    })
+    .await
+    .map_err(|e| e.to_string())??;
     let mut hooks = Webhooks::new(
-        webhook::signing_key(cfg.webhook_secret.as_deref(), &cfg.data_dir)?,
+        key,
         cfg.allow_private_callbacks,
         tokio::runtime::Handle::current(),
         metrics.clone(),

@@ -17,26 +17,43 @@ use std::net::IpAddr;
 use std::sync::Arc;
 use std::time::Duration;
 
-/// The signing key: `secret` when given, else the one kept in `data_dir/webhook_secret`,
-/// generated there on first start.
-pub fn signing_key(secret: Option<&str>, data_dir: &std::path::Path) -> Result<Vec<u8>, String> {
-    if let Some(s) = secret {
+/// The signing key: `secret` when given; else the one the store keeps for every process on
+/// it (PostgreSQL: the first replica's, so that all sign alike); else the one kept in
+/// `data_dir/webhook_secret`, generated there on first start.
+pub fn signing_key(
+    secret: Option<&str>,
+    store: &dyn Store,
+    data_dir: &std::path::Path,
+) -> Result<Vec<u8>, String> {
+    // An empty value (an unset variable passed on by a deployment file) means none.
+    if let Some(s) = secret.filter(|s| !s.trim().is_empty()) {
         return decode_secret(s);
+    }
+    if let Some(shared) = store
+        .shared_webhook_secret(&generate_secret())
+        .map_err(|e| format!("webhook secret: {e}"))?
+    {
+        return decode_secret(&shared);
     }
     let path = data_dir.join("webhook_secret");
     if let Ok(s) = std::fs::read_to_string(&path) {
         return decode_secret(&s);
     }
+    let secret = generate_secret();
+    std::fs::write(&path, &secret).map_err(|e| format!("{}: {e}", path.display()))?;
+    tracing::info!(path = %path.display(), "generated a webhook signing secret");
+    decode_secret(&secret)
+}
+
+/// A new random `whsec_<base64 of 32 bytes>`.
+fn generate_secret() -> String {
     let mut key = Vec::with_capacity(32);
     key.extend_from_slice(uuid::Uuid::new_v4().as_bytes());
     key.extend_from_slice(uuid::Uuid::new_v4().as_bytes());
-    let secret = format!(
+    format!(
         "whsec_{}",
         base64::engine::general_purpose::STANDARD.encode(&key)
-    );
-    std::fs::write(&path, secret).map_err(|e| format!("{}: {e}", path.display()))?;
-    tracing::info!(path = %path.display(), "generated a webhook signing secret");
-    Ok(key)
+    )
 }
 
 /// How long a sender holds a delivery: more than one attempt's timeout (10 s).

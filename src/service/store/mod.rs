@@ -160,6 +160,12 @@ pub trait Store: Blobs {
     fn end_delivery(&self, id: i64, worker: &str) -> Result<bool, StoreError>;
     /// A delivery `worker` holds failed: try again at `due_at`, one more attempt counted.
     fn retry_delivery(&self, id: i64, worker: &str, due_at: i64) -> Result<bool, StoreError>;
+    /// The webhook signing secret every process on this store shares: the stored one, or
+    /// `candidate`, stored, when there is none yet (the first process to ask sets it). None
+    /// when the store keeps no secret (SQLite: the file beside it does).
+    fn shared_webhook_secret(&self, _candidate: &str) -> Result<Option<String>, StoreError> {
+        Ok(None)
+    }
     /// Call `wake` whenever a job may have been queued by any process (a backend that can
     /// push this, as PostgreSQL's LISTEN/NOTIFY, wakes idle workers at once; without it
     /// they find work by polling).

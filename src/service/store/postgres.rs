@@ -103,6 +103,15 @@ CREATE TABLE deliveries (
 CREATE INDEX deliveries_due ON deliveries(due_at, id);
 ",
     ),
+    (
+        3,
+        "
+CREATE TABLE settings (
+  key TEXT PRIMARY KEY,
+  value TEXT NOT NULL
+);
+",
+    ),
 ];
 
 const JOB_COLS: &str = "seq, id, kind, mesh_id, reference_mesh_id, params, callback_url, status, \
@@ -750,6 +759,25 @@ impl Store for PgStore {
                 .await?;
             let n: i64 = c.query_one(&st, &[&s.as_str()]).await?.try_get(0)?;
             Ok(n as usize)
+        })
+    }
+
+    fn shared_webhook_secret(&self, candidate: &str) -> Result<Option<String>, StoreError> {
+        self.run(async {
+            let c = self.pool.get().await?;
+            c.execute(
+                "INSERT INTO settings (key, value) VALUES ('webhook_secret', $1) \
+                 ON CONFLICT (key) DO NOTHING",
+                &[&candidate],
+            )
+            .await?;
+            let r = c
+                .query_one(
+                    "SELECT value FROM settings WHERE key = 'webhook_secret'",
+                    &[],
+                )
+                .await?;
+            Ok(Some(r.try_get(0)?))
         })
     }
 
