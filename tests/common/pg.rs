@@ -108,11 +108,14 @@ impl PgCluster {
         // A port may be taken between choosing and binding: try a few.
         for _ in 0..5 {
             c.port = free_port();
+            // FLATMESH_PG_OPTS: extra server options (say `-c log_min_duration_statement=5`
+            // to see slow statements; the log is copied to FLATMESH_PG_LOG when set).
             let opts = format!(
                 "-p {} -k {} -c listen_addresses=127.0.0.1 -c fsync=off \
-                 -c synchronous_commit=off -c full_page_writes=off -c max_connections=200",
+                 -c synchronous_commit=off -c full_page_writes=off -c max_connections=200 {}",
                 c.port,
-                c.dir.display()
+                c.dir.display(),
+                std::env::var("FLATMESH_PG_OPTS").unwrap_or_default()
             );
             let log = c.dir.join("server.log");
             if c.try_run(
@@ -195,6 +198,9 @@ impl PgCluster {
 
 impl Drop for PgCluster {
     fn drop(&mut self) {
+        if let Ok(to) = std::env::var("FLATMESH_PG_LOG") {
+            let _ = std::fs::copy(self.dir.join("server.log"), to);
+        }
         let data = self.dir.join("data");
         let _ = self
             .command(
