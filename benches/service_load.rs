@@ -15,10 +15,12 @@
 //! prints the jobs finished per second and the status-poll latencies.
 //!
 //! Measured (2-core VM, SECONDS=6, one run each): SQLite, paced with both workers busy:
-//! polls p50 0.11 / p99 0.44 ms. PostgreSQL, same load: 1 replica p50 0.95 / p99 46 ms,
-//! 2 replicas 5.4 / 48 ms, 3 replicas 5.8 / 59 ms; with idle workers (BUSY=0) 1 replica
-//! p99 2.0 ms. So the 5 ms bar holds on PostgreSQL only while the workers are idle (the
-//! tail is not the workers' CPU share: nice 19 and SCHED_IDLE workers gave 45 and 35 ms).
+//! polls p50 0.11 / p99 0.44 ms. PostgreSQL, same load, polls read asynchronously on the
+//! HTTP runtime: 1 replica p50 0.40 / p99 19–22 ms (46 ms through the blocking pool, before),
+//! 3 replicas 0.61 / 32 ms (59 before); with idle workers (BUSY=0) p99 2.0 ms. So the 5 ms
+//! bar holds on PostgreSQL only while the workers are idle; the tail is scheduling on two
+//! saturated cores (statements wait in `bind`; not the workers' CPU share: nice 19 and
+//! SCHED_IDLE workers changed nothing).
 //! Small-job throughput: 1 replica 293 jobs/s, 2 replicas 407, 3 replicas 400 (two
 //! cores: beyond two processes the replicas share them).
 

@@ -372,12 +372,16 @@ fn submitted(st: &AppState, job: JobRecord, request_hash: &str, replayed: bool) 
 /// this thread, since the hand-off to a blocking thread costs more than the read (status poll
 /// p99 with both workers busy 4.8 -> 3.3-4.1 ms in `benches/service_load.rs`).
 async fn get_job_rec(st: &AppState, id: &str) -> Result<JobRecord, Problem> {
-    let found = match st.store.try_get_job_now(id) {
-        Some(r) => r?,
-        None => {
-            let store = st.store.clone();
-            let id2 = id.to_string();
-            blocking(move || Ok(store.get_job(&id2)?)).await?
+    let found = if let Some(fut) = st.store.get_job_async(id) {
+        fut.await?
+    } else {
+        match st.store.try_get_job_now(id) {
+            Some(r) => r?,
+            None => {
+                let store = st.store.clone();
+                let id2 = id.to_string();
+                blocking(move || Ok(store.get_job(&id2)?)).await?
+            }
         }
     };
     found.ok_or_else(|| Problem::not_found("job", id))

@@ -93,6 +93,15 @@ pub trait Store: Blobs {
     fn try_get_job_now(&self, _id: &str) -> Option<Result<Option<JobRecord>, StoreError>> {
         None
     }
+    /// `get_job` as a future for the async handlers, where the backend is asynchronous
+    /// (PostgreSQL): no blocking-pool hop. None: use [`Store::try_get_job_now`] or `get_job`.
+    fn get_job_async(
+        &self,
+        _id: &str,
+    ) -> Option<futures_util::future::BoxFuture<'static, Result<Option<JobRecord>, StoreError>>>
+    {
+        None
+    }
     /// Overwrite a job's mutable fields.
     fn update_job(&self, j: &JobRecord) -> Result<(), StoreError>;
     /// Delete a job row; false when absent.

@@ -464,6 +464,21 @@ impl Store for PgStore {
         self.run(async { Ok(self.select("id = $1", &[&id], "").await?.pop()) })
     }
 
+    fn get_job_async(
+        &self,
+        id: &str,
+    ) -> Option<futures_util::future::BoxFuture<'static, Result<Option<JobRecord>, StoreError>>>
+    {
+        let (pool, id) = (self.pool.clone(), id.to_string());
+        Some(Box::pin(async move {
+            let c = pool.get().await?;
+            let st = c
+                .prepare_cached(&format!("SELECT {JOB_COLS} FROM jobs WHERE id = $1"))
+                .await?;
+            Ok(jobs_from(&c.query(&st, &[&id]).await?)?.pop())
+        }))
+    }
+
     fn update_job(&self, j: &JobRecord) -> Result<(), StoreError> {
         let progress = j.progress.as_ref().map(|p| p.to_string());
         let error = j.error.as_ref().map(to_json).transpose()?;
