@@ -54,6 +54,23 @@ async fn post_for_id(req: reqwest::RequestBuilder) -> String {
     v["id"].as_str().unwrap().to_string()
 }
 
+/// Jobs running over every replica, from their `/readyz`.
+async fn running_jobs(c: &reqwest::Client, bases: &[String]) -> usize {
+    let mut running = 0;
+    for b in bases {
+        let v: Value = c
+            .get(format!("{b}/readyz"))
+            .send()
+            .await
+            .unwrap()
+            .json()
+            .await
+            .unwrap();
+        running += v["running"].as_u64().unwrap_or(0) as usize;
+    }
+    running
+}
+
 fn pct(v: &mut [f64], p: f64) -> f64 {
     if v.is_empty() {
         return f64::NAN;
@@ -134,18 +151,7 @@ fn main() {
         }
         // wait until the workers are busy (every replica's)
         loop {
-            let mut running = 0;
-            for b in &bases {
-                let v: Value = c
-                    .get(format!("{b}/readyz"))
-                    .send()
-                    .await
-                    .unwrap()
-                    .json()
-                    .await
-                    .unwrap();
-                running += v["running"].as_u64().unwrap_or(0) as usize;
-            }
+            let running = running_jobs(&c, &bases).await;
             if !busy || running == workers * bases.len() {
                 break;
             }
@@ -277,18 +283,7 @@ async fn phase(
         errors += e;
     }
     let elapsed = start.elapsed().as_secs_f64();
-    let mut running = 0;
-    for b in bases {
-        let v: Value = c
-            .get(format!("{b}/readyz"))
-            .send()
-            .await
-            .unwrap()
-            .json()
-            .await
-            .unwrap();
-        running += v["running"].as_u64().unwrap_or(0);
-    }
+    let running = running_jobs(c, bases).await;
     let total = polls.len() + submits.len();
     println!(
         "service_load [{label}{}]: {clients} clients, {elapsed:.1} s, jobs running at end: {}",

@@ -21,6 +21,17 @@ async fn db(url: &str) -> tokio_postgres::Client {
     client
 }
 
+/// Blob rows whose key starts with `prefix`.
+async fn blob_count(db: &tokio_postgres::Client, prefix: &str) -> i64 {
+    db.query_one(
+        "SELECT COUNT(*) FROM blobs WHERE starts_with(key, $1)",
+        &[&prefix],
+    )
+    .await
+    .unwrap()
+    .get(0)
+}
+
 /// The worker holding a running job, if any.
 async fn holder(db: &tokio_postgres::Client, id: &str) -> Option<String> {
     db.query_opt(
@@ -56,14 +67,7 @@ async fn one_replica_keeps_everything_in_the_database() {
     assert!(!dir.join("flatmesh.sqlite3").exists());
     assert!(!dir.join("blobs").exists());
     let d = db(&url).await;
-    let n: i64 = d
-        .query_one(
-            "SELECT COUNT(*) FROM blobs WHERE starts_with(key, $1)",
-            &[&format!("jobs/{id}/")],
-        )
-        .await
-        .unwrap()
-        .get(0);
+    let n = blob_count(&d, &format!("jobs/{id}/")).await;
     assert!(n >= 3, "{n} artifacts stored");
     // Deleting the job deletes its blobs.
     let r = c
@@ -72,14 +76,7 @@ async fn one_replica_keeps_everything_in_the_database() {
         .await
         .unwrap();
     assert_eq!(r.status(), 204);
-    let n: i64 = d
-        .query_one(
-            "SELECT COUNT(*) FROM blobs WHERE starts_with(key, $1)",
-            &[&format!("jobs/{id}/")],
-        )
-        .await
-        .unwrap()
-        .get(0);
+    let n = blob_count(&d, &format!("jobs/{id}/")).await;
     assert_eq!(n, 0);
     // A restart finds the mesh again.
     drop(s);
