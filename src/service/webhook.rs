@@ -235,8 +235,12 @@ impl Webhooks {
             .as_ref()
             .and_then(|j| Some((j, j.callback_url.clone()?)))
         {
-            // The job (or its callback) is gone: nothing to send.
-            None => Ok(()),
+            // The job (or its callback) is gone: nothing to send, nothing to count.
+            None => {
+                let w = worker.to_string();
+                let _ = tokio::task::spawn_blocking(move || store.end_delivery(d.id, &w)).await;
+                return;
+            }
             Some((job, url)) => {
                 let payload = serde_json::json!({
                     "type": d.event,
