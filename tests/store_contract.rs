@@ -26,7 +26,7 @@ fn postgres_store_keeps_the_contract() {
     };
     let url = pg.database("contract");
     let store = PgStore::open(&url, 4).unwrap();
-    assert_eq!(store.migrations().unwrap(), [1, 2, 3]);
+    assert_eq!(store.migrations().unwrap(), [1, 2, 3, 4]);
     let open = || -> Arc<dyn Store> { Arc::new(PgStore::open(&url, 4).unwrap()) };
     flatmesh::service::store::contract::check(&store, &open);
     // The webhook secret: the first to ask sets it, every handle gets the same.
@@ -47,7 +47,7 @@ fn postgres_store_keeps_the_contract() {
     // Opening again applies nothing twice.
     assert_eq!(
         PgStore::open(&url, 1).unwrap().migrations().unwrap(),
-        [1, 2, 3]
+        [1, 2, 3, 4]
     );
 }
 
@@ -66,7 +66,7 @@ fn postgres_migrations_apply_once_under_concurrent_starts() {
         ts.into_iter().map(|t| t.join().unwrap()).collect()
     });
     for s in &stores {
-        assert_eq!(s.migrations().unwrap(), [1, 2, 3]);
+        assert_eq!(s.migrations().unwrap(), [1, 2, 3, 4]);
         s.ping().unwrap();
     }
 }
@@ -105,4 +105,77 @@ fn postgres_queue_notifications_reach_other_handles() {
             "no notification in 10 s"
         );
     }
+}
+
+/// A replica whose listening connection is cut misses the notifications sent meanwhile: it
+/// must not answer status polls from what it cached before, and it must come back.
+#[test]
+fn postgres_status_polls_survive_a_lost_listener() {
+    use flatmesh::service::domain::{JobRecord, Status};
+    use std::time::{Duration, Instant};
+    let Some(pg) = PgCluster::start("PostgreSQL lost listener") else {
+        return;
+    };
+    let url = pg.database("listener");
+    let a = PgStore::open(&url, 2).unwrap();
+    let b = PgStore::open(&url, 2).unwrap();
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let poll = |id: &str| rt.block_on(a.get_job_async(id).unwrap()).unwrap();
+    let until = |what: &str, f: &dyn Fn() -> bool| {
+        let t = Instant::now();
+        while !f() {
+            assert!(t.elapsed() < Duration::from_secs(5), "{what} within 5 s");
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    };
+    let set_status = |s: Status| {
+        let mut j = b.get_job("j_l").unwrap().unwrap();
+        j.status = s;
+        b.update_job(&j).unwrap();
+    };
+    b.insert_job(&JobRecord::queued("j_l", "report", "m", 0))
+        .unwrap();
+    set_status(Status::Running);
+    // A change elsewhere shows here once a's listener is up (then it caches).
+    set_status(Status::Failed);
+    until("the first change", &|| {
+        poll("j_l").map(|j| j.status) == Some(Status::Failed)
+    });
+    let admin = {
+        let (c, conn) = rt
+            .block_on(tokio_postgres::connect(&url, tokio_postgres::NoTls))
+            .unwrap();
+        rt.spawn(conn);
+        c
+    };
+    let cut = || {
+        let rows = rt
+            .block_on(admin.query(
+                "SELECT pg_terminate_backend(pid) FROM pg_stat_activity \
+                 WHERE application_name = 'flatmesh-listener'",
+                &[],
+            ))
+            .unwrap();
+        rows.len()
+    };
+    // Both replicas' listeners are cut, and a change is made while nobody listens.
+    assert_eq!(cut(), 2, "two listeners were connected");
+    set_status(Status::Succeeded);
+    until("a change made while the listener was down", &|| {
+        poll("j_l").map(|j| j.status) == Some(Status::Succeeded)
+    });
+    // The listeners come back and changes flow again.
+    until("the listeners reconnecting", &|| {
+        rt.block_on(admin.query(
+            "SELECT 1 FROM pg_stat_activity WHERE application_name = 'flatmesh-listener'",
+            &[],
+        ))
+        .unwrap()
+        .len()
+            == 2
+    });
+    set_status(Status::Cancelled);
+    until("a change after reconnecting", &|| {
+        poll("j_l").map(|j| j.status) == Some(Status::Cancelled)
+    });
 }

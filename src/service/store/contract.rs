@@ -15,8 +15,104 @@ fn queued(id: &str) -> JobRecord {
     JobRecord::queued(id, "report", "m_x", 0)
 }
 
+/// A job's status, read both ways the service reads it: `get_job` and the status-poll
+/// path (which a backend may answer from a cache); the two must agree on this handle.
 fn status(s: &dyn Store, id: &str) -> Status {
-    s.get_job(id).unwrap().expect("job exists").status
+    let j = s.get_job(id).unwrap().expect("job exists");
+    assert_eq!(
+        poll(s, id),
+        Some(j.clone()),
+        "a status poll reads this handle's writes"
+    );
+    j.status
+}
+
+/// The job as a status poll reads it ([`Store::get_job_async`], else
+/// [`Store::try_get_job_now`], else `get_job`).
+fn poll(s: &dyn Store, id: &str) -> Option<JobRecord> {
+    // One runtime for the whole suite: connections a pool opens here are driven by it.
+    static RT: std::sync::OnceLock<tokio::runtime::Runtime> = std::sync::OnceLock::new();
+    if let Some(f) = s.get_job_async(id) {
+        let rt = RT.get_or_init(|| {
+            tokio::runtime::Builder::new_multi_thread()
+                .worker_threads(1)
+                .enable_all()
+                .build()
+                .expect("a runtime")
+        });
+        return rt.block_on(f).unwrap();
+    }
+    match s.try_get_job_now(id) {
+        Some(r) => r.unwrap(),
+        None => s.get_job(id).unwrap(),
+    }
+}
+
+/// Status polls on one handle follow changes made through another within `within`
+/// (a backend that caches polls learns of them by notification), and again right after
+/// changes of its own.
+fn status_polls_follow_other_handles(s: &dyn Store, open: &dyn Fn() -> Arc<dyn Store>) {
+    let other = open();
+    let follows = |id: &str, want: Option<Status>| {
+        let t = std::time::Instant::now();
+        loop {
+            let got = poll(s, id).map(|j| j.status);
+            if got == want {
+                return;
+            }
+            assert!(
+                t.elapsed() < std::time::Duration::from_secs(5),
+                "a poll here still shows {got:?} for {id}, changed elsewhere to {want:?}"
+            );
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+    };
+    other.insert_job(&queued("j_p1")).unwrap();
+    assert_eq!(poll(s, "j_p1").unwrap().status, Status::Queued);
+    let j = other.claim("w_other", 0, LEASE).unwrap().unwrap();
+    assert_eq!(j.id, "j_p1");
+    follows("j_p1", Some(Status::Running));
+    // polled again: a cache would now hold it
+    assert_eq!(poll(s, "j_p1").unwrap().status, Status::Running);
+    // a lease renewal alone changes nothing a poll shows
+    let beat = other.heartbeat("w_other", "j_p1", 1, LEASE, None);
+    assert!(matches!(beat.unwrap(), Lease::Held { .. }));
+    assert_eq!(poll(s, "j_p1"), other.get_job("j_p1").unwrap());
+    let beat = other.heartbeat(
+        "w_other",
+        "j_p1",
+        1,
+        LEASE,
+        Some(&serde_json::json!({"iteration": 7})),
+    );
+    assert!(matches!(beat.unwrap(), Lease::Held { .. }));
+    let t = std::time::Instant::now();
+    while poll(s, "j_p1").unwrap().progress != Some(serde_json::json!({"iteration": 7})) {
+        assert!(
+            t.elapsed() < std::time::Duration::from_secs(5),
+            "progress did not follow"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    // a cancel requested here is no visible change; its end, finished elsewhere, is
+    s.request_cancel("j_p1", 2, 100).unwrap();
+    let mut done = other.get_job("j_p1").unwrap().unwrap();
+    done.status = Status::Cancelled;
+    done.finished_at = Some(3);
+    assert!(other.finish("w_other", &done).unwrap());
+    follows("j_p1", Some(Status::Cancelled));
+    // deleted elsewhere: gone here too
+    assert!(other.delete_job("j_p1").unwrap());
+    follows("j_p1", None);
+    // and changes made here show at once, whatever was polled before
+    s.insert_job(&queued("j_p2")).unwrap();
+    assert_eq!(poll(s, "j_p2").unwrap().status, Status::Queued);
+    let mut u = s.get_job("j_p2").unwrap().unwrap();
+    u.status = Status::Failed;
+    s.update_job(&u).unwrap();
+    assert_eq!(poll(s, "j_p2").unwrap().status, Status::Failed);
+    assert!(s.delete_job("j_p2").unwrap());
+    assert_eq!(poll(s, "j_p2"), None);
 }
 
 /// Run the whole contract; panics at the first violation, naming it.
@@ -28,6 +124,7 @@ pub fn check(store: &dyn Store, open: &dyn Fn() -> Arc<dyn Store>) {
     heartbeats_and_cancels(store);
     expired_leases_requeue(store);
     concurrent_claims_are_exclusive(store, open);
+    status_polls_follow_other_handles(store, open);
     webhook_outbox(store, open);
 }
 

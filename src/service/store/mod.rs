@@ -6,6 +6,7 @@
 
 pub mod contract;
 mod files;
+mod job_cache;
 mod postgres;
 mod sqlite;
 

@@ -8,14 +8,17 @@
 //! an advisory lock (replicas starting together apply each once). Blobs are `bytea` rows
 //! (one value is at most 1 GB in PostgreSQL; uploads are far below that, bounded by
 //! `--max-upload-bytes`). A queued job is announced by `NOTIFY flatmesh_jobs` in the
-//! inserting transaction; [`Store::watch_queue`] listens on a connection of its own and
-//! wakes idle workers at once (they also poll).
+//! inserting transaction; one listener per store, on a connection of its own, wakes idle
+//! workers at once (they also poll) and keeps the status-poll cache ([`super::job_cache`])
+//! true to the database: every change to a job row is announced on
+//! `flatmesh_job_changes` by a trigger.
 
+use super::job_cache::{JobCache, Token};
 use super::{Blobs, CancelOutcome, Delivery, Inserted, JobFilter, Lease, Store, StoreError};
 use crate::service::domain::{JobError, JobRecord, MeshRecord, Status};
 use deadpool_postgres::{Manager, ManagerConfig, Pool, RecyclingMethod, Runtime};
 use std::future::Future;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use tokio_postgres::{NoTls, Row};
 
@@ -112,6 +115,29 @@ CREATE TABLE settings (
 );
 ",
     ),
+    (
+        4,
+        "
+CREATE FUNCTION flatmesh_job_changed() RETURNS trigger LANGUAGE plpgsql AS $$
+BEGIN
+  PERFORM pg_notify('flatmesh_job_changes', OLD.id);
+  RETURN NULL;
+END $$;
+-- Only what a status poll shows (not lease renewals), and never a queued job's: those are
+-- not cached, so claims and cancels of queued jobs (most of a busy queue's writes) stay
+-- silent. Every NOTIFY serialises commits, so each one costs throughput.
+CREATE TRIGGER jobs_changed AFTER UPDATE ON jobs
+  FOR EACH ROW WHEN (OLD.status <> 'queued' AND
+    (OLD.status, OLD.progress, OLD.error, OLD.started_at, OLD.finished_at, OLD.expires_at,
+     OLD.attempts, OLD.artifacts, OLD.outcome)
+    IS DISTINCT FROM
+    (NEW.status, NEW.progress, NEW.error, NEW.started_at, NEW.finished_at, NEW.expires_at,
+     NEW.attempts, NEW.artifacts, NEW.outcome))
+  EXECUTE FUNCTION flatmesh_job_changed();
+CREATE TRIGGER jobs_deleted AFTER DELETE ON jobs
+  FOR EACH ROW WHEN (OLD.status <> 'queued') EXECUTE FUNCTION flatmesh_job_changed();
+",
+    ),
 ];
 
 const JOB_COLS: &str = "seq, id, kind, mesh_id, reference_mesh_id, params, callback_url, status, \
@@ -120,13 +146,24 @@ const JOB_COLS: &str = "seq, id, kind, mesh_id, reference_mesh_id, params, callb
 
 /// The channel a queued job is announced on.
 const CHANNEL: &str = "flatmesh_jobs";
+/// The channel every change to a job row is announced on (payload: the job id).
+const CHANGES: &str = "flatmesh_job_changes";
+
+/// How often the listener checks that its connection still answers (and how long it waits).
+const KEEPALIVE: Duration = Duration::from_secs(2);
+
+/// Called when a job is queued (idle workers claim).
+type QueueWaker = Arc<dyn Fn() + Send + Sync>;
 
 /// PostgreSQL index and blobs.
 pub struct PgStore {
     /// Runs the pool's connections; `None` only while dropping.
     rt: Option<tokio::runtime::Runtime>,
     pool: Pool,
-    config: tokio_postgres::Config,
+    /// Status polls answered from memory while the listener runs.
+    cache: Arc<JobCache>,
+    /// Registered by [`Store::watch_queue`].
+    wakers: Arc<Mutex<Vec<QueueWaker>>>,
 }
 
 impl Drop for PgStore {
@@ -228,10 +265,33 @@ impl PgStore {
         let store = PgStore {
             rt: Some(rt),
             pool,
-            config,
+            cache: Arc::default(),
+            wakers: Arc::default(),
         };
         store.migrate()?;
+        let mut listener = config;
+        // Named, so that an operator (or a test) can tell it from the pool's connections.
+        listener.application_name("flatmesh-listener");
+        store.start_listener(listener);
         Ok(store)
+    }
+
+    /// Listen for queued jobs and job changes for as long as the store lives, reconnecting
+    /// after a lost connection (meanwhile the cache is off and idle workers poll).
+    fn start_listener(&self, config: tokio_postgres::Config) {
+        let Some(rt) = &self.rt else {
+            return;
+        };
+        let (cache, wakers) = (self.cache.clone(), self.wakers.clone());
+        rt.spawn(async move {
+            loop {
+                if let Err(e) = listen(&config, &cache, &wakers).await {
+                    tracing::warn!(error = %e, "database notifications lost; reconnecting");
+                }
+                cache.set_live(false);
+                tokio::time::sleep(Duration::from_secs(1)).await;
+            }
+        });
     }
 
     fn run<T>(&self, f: impl Future<Output = Result<T, StoreError>>) -> Result<T, StoreError> {
@@ -469,13 +529,26 @@ impl Store for PgStore {
         id: &str,
     ) -> Option<futures_util::future::BoxFuture<'static, Result<Option<JobRecord>, StoreError>>>
     {
+        if let Some(j) = self.cache.get(id) {
+            return Some(Box::pin(std::future::ready(Ok(Some(j)))));
+        }
+        // Taken before the query, so that a change committed after its snapshot revokes it.
+        let fill = self.cache.begin(id).map(|token| Fill {
+            cache: self.cache.clone(),
+            id: id.to_string(),
+            token,
+        });
         let (pool, id) = (self.pool.clone(), id.to_string());
         Some(Box::pin(async move {
             let c = pool.get().await?;
             let st = c
                 .prepare_cached(&format!("SELECT {JOB_COLS} FROM jobs WHERE id = $1"))
                 .await?;
-            Ok(jobs_from(&c.query(&st, &[&id]).await?)?.pop())
+            let found = jobs_from(&c.query(&st, &[&id]).await?)?.pop();
+            if let Some(f) = fill {
+                f.store(found.as_ref());
+            }
+            Ok(found)
         }))
     }
 
@@ -485,7 +558,7 @@ impl Store for PgStore {
         let artifacts = to_json(&j.artifacts)?;
         let outcome = j.outcome.as_ref().map(|p| p.to_string());
         let attempts = j.attempts as i32;
-        self.run(async {
+        let r = self.run(async {
             let c = self.pool.get().await?;
             c.execute(
                 "UPDATE jobs SET status=$2, progress=$3, error=$4, started_at=$5, \
@@ -506,14 +579,18 @@ impl Store for PgStore {
             )
             .await?;
             Ok(())
-        })
+        });
+        self.cache.invalidate(&j.id);
+        r
     }
 
     fn delete_job(&self, id: &str) -> Result<bool, StoreError> {
-        self.run(async {
+        let r = self.run(async {
             let c = self.pool.get().await?;
             Ok(c.execute("DELETE FROM jobs WHERE id = $1", &[&id]).await? > 0)
-        })
+        });
+        self.cache.invalidate(id);
+        r
     }
 
     fn list_jobs(&self, f: &JobFilter) -> Result<Vec<JobRecord>, StoreError> {
@@ -555,7 +632,7 @@ impl Store for PgStore {
         now: i64,
         lease_ms: i64,
     ) -> Result<Option<JobRecord>, StoreError> {
-        self.run(async {
+        let r = self.run(async {
             let c = self.pool.get().await?;
             // SKIP LOCKED: replicas claiming at once take different jobs, none waits.
             let st = c
@@ -569,7 +646,11 @@ impl Store for PgStore {
                 ))
                 .await?;
             Ok(jobs_from(&c.query(&st, &[&worker, &now, &lease_ms]).await?)?.pop())
-        })
+        });
+        if let Ok(Some(j)) = &r {
+            self.cache.invalidate(&j.id);
+        }
+        r
     }
 
     fn heartbeat(
@@ -581,7 +662,7 @@ impl Store for PgStore {
         progress: Option<&serde_json::Value>,
     ) -> Result<Lease, StoreError> {
         let progress = progress.map(|p| p.to_string());
-        self.run(async {
+        let r = self.run(async {
             let c = self.pool.get().await?;
             let st = c
                 .prepare_cached(
@@ -598,7 +679,9 @@ impl Store for PgStore {
                 },
                 None => Lease::Lost,
             })
-        })
+        });
+        self.cache.invalidate(id);
+        r
     }
 
     fn finish(&self, worker: &str, j: &JobRecord) -> Result<bool, StoreError> {
@@ -606,7 +689,7 @@ impl Store for PgStore {
         let error = j.error.as_ref().map(to_json).transpose()?;
         let artifacts = to_json(&j.artifacts)?;
         let outcome = j.outcome.as_ref().map(|p| p.to_string());
-        self.run(async {
+        let r = self.run(async {
             let mut c = self.pool.get().await?;
             let tx = c.transaction().await?;
             let n = tx
@@ -632,7 +715,9 @@ impl Store for PgStore {
             }
             tx.commit().await?;
             Ok(n == 1)
-        })
+        });
+        self.cache.invalidate(&j.id);
+        r
     }
 
     fn request_cancel(
@@ -641,7 +726,7 @@ impl Store for PgStore {
         now: i64,
         expires_at: i64,
     ) -> Result<CancelOutcome, StoreError> {
-        self.run(async {
+        let r = self.run(async {
             let mut c = self.pool.get().await?;
             let tx = c.transaction().await?;
             let rows = tx
@@ -676,11 +761,13 @@ impl Store for PgStore {
             };
             tx.commit().await?;
             Ok(out)
-        })
+        });
+        self.cache.invalidate(id);
+        r
     }
 
     fn requeue_expired(&self, now: i64, expires_at: i64) -> Result<Vec<JobRecord>, StoreError> {
-        self.run(async {
+        let r = self.run(async {
             let mut c = self.pool.get().await?;
             let tx = c.transaction().await?;
             let rows = tx
@@ -706,7 +793,11 @@ impl Store for PgStore {
             }
             tx.commit().await?;
             Ok(back)
-        })
+        });
+        for j in r.iter().flatten() {
+            self.cache.invalidate(&j.id);
+        }
+        r
     }
 
     fn claim_delivery(
@@ -796,38 +887,56 @@ impl Store for PgStore {
         })
     }
 
-    fn watch_queue(&self, wake: Arc<dyn Fn() + Send + Sync>) -> Result<(), StoreError> {
-        let Some(rt) = &self.rt else {
-            return Ok(());
-        };
-        let config = self.config.clone();
-        rt.spawn(async move {
-            // Reconnect after a lost connection; idle workers poll meanwhile.
-            loop {
-                if let Err(e) = listen(&config, &wake).await {
-                    tracing::warn!(error = %e, "queue notifications lost; reconnecting");
-                }
-                tokio::time::sleep(Duration::from_secs(1)).await;
-            }
-        });
+    fn watch_queue(&self, wake: QueueWaker) -> Result<(), StoreError> {
+        self.wakers
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push(wake);
         Ok(())
     }
 }
 
-/// One LISTEN session: call `wake` on every notification until the connection ends.
+/// Keeps a status poll's answer for the cache unless a change revoked its token; dropped
+/// unused (the poll failed or was abandoned), it frees the slot.
+struct Fill {
+    cache: Arc<JobCache>,
+    id: String,
+    token: Token,
+}
+
+impl Fill {
+    fn store(self, job: Option<&JobRecord>) {
+        self.cache.fill(&self.id, self.token, job);
+        std::mem::forget(self);
+    }
+}
+
+impl Drop for Fill {
+    fn drop(&mut self) {
+        self.cache.fill(&self.id, self.token, None);
+    }
+}
+
+/// One LISTEN session, until its connection ends: wake the workers for every queued job,
+/// drop the cached row of every changed job, and keep the cache live meanwhile.
 async fn listen(
     config: &tokio_postgres::Config,
-    wake: &Arc<dyn Fn() + Send + Sync>,
+    cache: &Arc<JobCache>,
+    wakers: &Arc<Mutex<Vec<QueueWaker>>>,
 ) -> Result<(), tokio_postgres::Error> {
     let (client, mut conn) = config.connect(NoTls).await?;
-    let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel();
+    let (cache2, wakers) = (cache.clone(), wakers.clone());
     let driver = tokio::spawn(async move {
         let mut messages = futures_util::stream::poll_fn(move |cx| conn.poll_message(cx));
         while let Some(m) = futures_util::StreamExt::next(&mut messages).await {
             match m {
+                Ok(tokio_postgres::AsyncMessage::Notification(n)) if n.channel() == CHANGES => {
+                    cache2.invalidate(n.payload());
+                }
                 Ok(tokio_postgres::AsyncMessage::Notification(_)) => {
-                    if tx.send(()).is_err() {
-                        break;
+                    let wakers = wakers.lock().unwrap_or_else(|e| e.into_inner()).clone();
+                    for wake in wakers {
+                        wake();
                     }
                 }
                 Ok(_) => {}
@@ -836,15 +945,31 @@ async fn listen(
         }
         Ok(())
     });
-    client.batch_execute(&format!("LISTEN {CHANNEL}")).await?;
-    while rx.recv().await.is_some() {
-        wake();
-    }
-    drop(client);
-    match driver.await {
-        Ok(r) => r,
-        Err(_) => Ok(()),
-    }
+    client
+        .batch_execute(&format!("LISTEN {CHANNEL}; LISTEN {CHANGES}"))
+        .await?;
+    cache.set_live(true);
+    // A connection can die without a word (a firewall dropping an idle one): ask it
+    // something now and then, and give it up when it does not answer.
+    let mut driver = driver;
+    let mut tick = tokio::time::interval(KEEPALIVE);
+    let ended = loop {
+        tokio::select! {
+            r = &mut driver => break r.unwrap_or(Ok(())),
+            _ = tick.tick() => {
+                if !matches!(
+                    tokio::time::timeout(KEEPALIVE, client.simple_query("SELECT 1")).await,
+                    Ok(Ok(_))
+                ) {
+                    tracing::warn!("the database listener stopped answering; reconnecting");
+                    break Ok(());
+                }
+            }
+        }
+    };
+    cache.set_live(false);
+    driver.abort();
+    ended
 }
 
 impl Blobs for PgStore {
