@@ -240,6 +240,26 @@ async fn three_replicas_act_as_one_service() {
         .unwrap()
         .get(0);
     assert_eq!(unfinished, 0);
+    // Queue depth is the store's: every replica reports the same empty queue, whichever
+    // claimed or submitted last.
+    for r in &reps {
+        let m = c
+            .get(r.url("/metrics"))
+            .send()
+            .await
+            .unwrap()
+            .text()
+            .await
+            .unwrap();
+        assert!(
+            m.lines().any(|l| l == "flatmesh_jobs_queued 0"),
+            "{}: {}",
+            r.base,
+            m.lines()
+                .find(|l| l.starts_with("flatmesh_jobs_queued "))
+                .unwrap_or("none")
+        );
+    }
     // Each job's webhook arrives once (the cancelled one's too), with its end.
     let mut want: Vec<(String, &str)> = ids.iter().map(|i| (i.clone(), "job.succeeded")).collect();
     want.push((id.clone(), "job.cancelled"));

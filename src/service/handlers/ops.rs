@@ -2,6 +2,7 @@
 
 use super::{blocking, ApiResult};
 use crate::jobs::Kind;
+use crate::service::domain::Status;
 use crate::service::problem::Problem;
 use crate::service::state::AppState;
 use axum::extract::State;
@@ -49,6 +50,12 @@ pub async fn readyz(State(st): State<AppState>) -> ApiResult {
 
 /// `GET /metrics`.
 pub async fn metrics(State(st): State<AppState>) -> Response {
+    // The queue is the store's, shared by every replica: its depth as of now, not as of this
+    // replica's last submit or claim (unchanged when the store does not answer).
+    let store = st.store.clone();
+    if let Ok(n) = blocking(move || Ok(store.count_with_status(Status::Queued)?)).await {
+        st.metrics.set_queued(n);
+    }
     (
         [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
         st.metrics.render(),
