@@ -243,14 +243,7 @@ async fn three_replicas_act_as_one_service() {
     // Queue depth is the store's: every replica reports the same empty queue, whichever
     // claimed or submitted last.
     for r in &reps {
-        let m = c
-            .get(r.url("/metrics"))
-            .send()
-            .await
-            .unwrap()
-            .text()
-            .await
-            .unwrap();
+        let m = String::from_utf8(download(&c, r, "/metrics").await).unwrap();
         assert!(
             m.lines().any(|l| l == "flatmesh_jobs_queued 0"),
             "{}: {}",

@@ -132,14 +132,8 @@ async fn a_data_directory_from_before_leases_keeps_its_jobs() {
     let q = wait_for(&c, &s, queued, &["succeeded", "failed", "cancelled"]).await;
     assert_eq!(q["status"], "succeeded", "{q}");
     assert_eq!(q["attempts"], 1, "{q}");
-    let listed: serde_json::Value = c
-        .get(s.url("/v1/jobs?page_size=10"))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let listed: serde_json::Value =
+        serde_json::from_slice(&download(&c, &s, "/v1/jobs?page_size=10").await).unwrap();
     assert_eq!(listed["jobs"].as_array().map(Vec::len), Some(3), "{listed}");
     drop(s);
     // The index now has what this version needs.
