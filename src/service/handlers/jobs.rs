@@ -527,10 +527,13 @@ async fn artifact(st: &AppState, id: &str, name: &str, media: &str) -> ApiResult
     }
     let store = st.store.clone();
     let key = format!("jobs/{id}/{name}");
-    let bytes = blocking(move || {
-        store
-            .get_blob(&key)?
-            .ok_or_else(|| Problem::internal("result lost"))
+    let id2 = id.to_string();
+    let bytes = blocking(move || match store.get_blob(&key)? {
+        Some(b) => Ok(b),
+        // Deleted (expired, or through another replica) since the job was read: gone, not
+        // lost; the job read above may have come from a status-poll cache.
+        None if store.get_job(&id2)?.is_none() => Err(Problem::not_found("job", &id2)),
+        None => Err(Problem::internal("result lost")),
     })
     .await?;
     let disposition = format!("attachment; filename=\"{id}-{name}\"");

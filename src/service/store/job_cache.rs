@@ -31,8 +31,9 @@ const CAPACITY: usize = 8192;
 const MAX_AGE: Duration = Duration::from_secs(10);
 
 enum Slot {
-    /// A read is in flight; only the holder of this token may fill the slot.
-    Pending(u64),
+    /// A read is in flight, begun at this instant; only the holder of this token may fill
+    /// the slot.
+    Pending(u64, Instant),
     Filled(Box<JobRecord>, Instant),
 }
 
@@ -42,6 +43,8 @@ struct Inner {
     live: bool,
     slots: HashMap<String, Slot>,
     next_token: u64,
+    /// Polls answered from memory.
+    hits: u64,
 }
 
 /// The cache; cheap to share behind an `Arc`.
@@ -61,11 +64,13 @@ impl JobCache {
 
     /// The cached row, when the cache is live and holds one.
     pub fn get(&self, id: &str) -> Option<JobRecord> {
-        let g = self.lock();
-        match g.slots.get(id) {
+        let mut g = self.lock();
+        let hit = match g.slots.get(id) {
             Some(Slot::Filled(j, at)) if g.live && at.elapsed() < MAX_AGE => Some((**j).clone()),
             _ => None,
-        }
+        };
+        g.hits += hit.is_some() as u64;
+        hit
     }
 
     /// Before reading `id` from the database: a token to store the answer with, or None
@@ -88,7 +93,8 @@ impl JobCache {
         }
         g.next_token += 1;
         let t = g.next_token;
-        g.slots.insert(id.to_string(), Slot::Pending(t));
+        g.slots
+            .insert(id.to_string(), Slot::Pending(t, Instant::now()));
         Some(Token(t))
     }
 
@@ -96,16 +102,16 @@ impl JobCache {
     /// still stands, i.e. no change to `id` was announced since [`JobCache::begin`].
     pub fn fill(&self, id: &str, token: Token, job: Option<&JobRecord>) {
         let mut g = self.lock();
-        if !matches!(g.slots.get(id), Some(Slot::Pending(t)) if *t == token.0) {
-            return;
-        }
+        // The row is as old as the read's start (a wait for a connection counts).
+        let begun = match g.slots.get(id) {
+            Some(Slot::Pending(t, at)) if *t == token.0 => *at,
+            _ => return,
+        };
         match job {
             // Queued rows change silently (see the trigger), so they are never kept.
             Some(j) if g.live && j.status != Status::Queued => {
-                g.slots.insert(
-                    id.to_string(),
-                    Slot::Filled(Box::new(j.clone()), Instant::now()),
-                );
+                g.slots
+                    .insert(id.to_string(), Slot::Filled(Box::new(j.clone()), begun));
             }
             _ => {
                 g.slots.remove(id);
@@ -124,6 +130,12 @@ impl JobCache {
         let mut g = self.lock();
         g.live = live;
         g.slots.clear();
+    }
+
+    /// Whether the cache serves (its listener is connected), and how many polls it answered.
+    pub fn stats(&self) -> (bool, u64) {
+        let g = self.lock();
+        (g.live, g.hits)
     }
 
     /// Entries held (filled or pending), for tests.

@@ -338,6 +338,12 @@ impl PgStore {
         })
     }
 
+    /// Whether status polls are answered from this store's cache now (its listener is
+    /// connected), and how many have been (tests and diagnostics).
+    pub fn status_cache(&self) -> (bool, u64) {
+        self.cache.stats()
+    }
+
     /// The migrations applied, in order (tests and diagnostics).
     pub fn migrations(&self) -> Result<Vec<i32>, StoreError> {
         self.run(async {
@@ -536,7 +542,7 @@ impl Store for PgStore {
         let fill = self.cache.begin(id).map(|token| Fill {
             cache: self.cache.clone(),
             id: id.to_string(),
-            token,
+            token: Some(token),
         });
         let (pool, id) = (self.pool.clone(), id.to_string());
         Some(Box::pin(async move {
@@ -661,6 +667,7 @@ impl Store for PgStore {
         lease_ms: i64,
         progress: Option<&serde_json::Value>,
     ) -> Result<Lease, StoreError> {
+        let progress_given = progress.is_some();
         let progress = progress.map(|p| p.to_string());
         let r = self.run(async {
             let c = self.pool.get().await?;
@@ -680,7 +687,10 @@ impl Store for PgStore {
                 None => Lease::Lost,
             })
         });
-        self.cache.invalidate(id);
+        // Only progress is visible (a lease renewal alone changes nothing a poll shows).
+        if progress_given {
+            self.cache.invalidate(id);
+        }
         r
     }
 
@@ -901,19 +911,23 @@ impl Store for PgStore {
 struct Fill {
     cache: Arc<JobCache>,
     id: String,
-    token: Token,
+    /// Taken by [`Fill::store`]; still here when dropped unused.
+    token: Option<Token>,
 }
 
 impl Fill {
-    fn store(self, job: Option<&JobRecord>) {
-        self.cache.fill(&self.id, self.token, job);
-        std::mem::forget(self);
+    fn store(mut self, job: Option<&JobRecord>) {
+        if let Some(t) = self.token.take() {
+            self.cache.fill(&self.id, t, job);
+        }
     }
 }
 
 impl Drop for Fill {
     fn drop(&mut self) {
-        self.cache.fill(&self.id, self.token, None);
+        if let Some(t) = self.token.take() {
+            self.cache.fill(&self.id, t, None);
+        }
     }
 }
 
@@ -923,10 +937,13 @@ async fn listen(
     config: &tokio_postgres::Config,
     cache: &Arc<JobCache>,
     wakers: &Arc<Mutex<Vec<QueueWaker>>>,
-) -> Result<(), tokio_postgres::Error> {
-    let (client, mut conn) = config.connect(NoTls).await?;
+) -> Result<(), StoreError> {
+    let timed = |what: &'static str| move |_| backend(format!("listener: {what} timed out"));
+    let (client, mut conn) = tokio::time::timeout(KEEPALIVE, config.connect(NoTls))
+        .await
+        .map_err(timed("connecting"))??;
     let (cache2, wakers) = (cache.clone(), wakers.clone());
-    let driver = tokio::spawn(async move {
+    let mut driver = tokio::spawn(async move {
         let mut messages = futures_util::stream::poll_fn(move |cx| conn.poll_message(cx));
         while let Some(m) = futures_util::StreamExt::next(&mut messages).await {
             match m {
@@ -945,31 +962,47 @@ async fn listen(
         }
         Ok(())
     });
-    client
-        .batch_execute(&format!("LISTEN {CHANNEL}; LISTEN {CHANGES}"))
-        .await?;
-    cache.set_live(true);
-    // A connection can die without a word (a firewall dropping an idle one): ask it
-    // something now and then, and give it up when it does not answer.
-    let mut driver = driver;
-    let mut tick = tokio::time::interval(KEEPALIVE);
-    let ended = loop {
-        tokio::select! {
-            r = &mut driver => break r.unwrap_or(Ok(())),
-            _ = tick.tick() => {
-                if !matches!(
-                    tokio::time::timeout(KEEPALIVE, client.simple_query("SELECT 1")).await,
-                    Ok(Ok(_))
-                ) {
-                    tracing::warn!("the database listener stopped answering; reconnecting");
-                    break Ok(());
+    let result = async {
+        tokio::time::timeout(
+            KEEPALIVE,
+            client.batch_execute(&format!("LISTEN {CHANNEL}; LISTEN {CHANGES}")),
+        )
+        .await
+        .map_err(timed("LISTEN"))??;
+        cache.set_live(true);
+        // A connection can die without a word (a firewall dropping an idle one), and a
+        // pooler in between may drop the LISTEN: check now and then that this session still
+        // listens on both channels, and give it up when it does not answer so.
+        let mut tick = tokio::time::interval(KEEPALIVE);
+        let channels = vec![CHANNEL, CHANGES];
+        let params: [&(dyn tokio_postgres::types::ToSql + Sync); 1] = [&channels];
+        loop {
+            tokio::select! {
+                r = &mut driver => {
+                    return match r {
+                        Ok(r) => Ok(r?),
+                        Err(e) => Err(backend(format!("listener: {e}"))),
+                    };
+                }
+                _ = tick.tick() => {
+                    let check = client.query_one(
+                        "SELECT count(*) FROM pg_listening_channels() c WHERE c = ANY($1)",
+                        &params,
+                    );
+                    match tokio::time::timeout(KEEPALIVE, check).await {
+                        Ok(Ok(row)) if row.get::<_, i64>(0) == 2 => {}
+                        Ok(Ok(_)) => return Err(backend("listener: no longer listening")),
+                        Ok(Err(e)) => return Err(e.into()),
+                        Err(_) => return Err(backend("listener: keepalive timed out")),
+                    }
                 }
             }
         }
-    };
+    }
+    .await;
     cache.set_live(false);
     driver.abort();
-    ended
+    result
 }
 
 impl Blobs for PgStore {
