@@ -16,7 +16,7 @@ use axum::routing::{on, MethodFilter, MethodRouter};
 use axum::Router;
 use tower_http::catch_panic::CatchPanicLayer;
 use tower_http::compression::CompressionLayer;
-use tower_http::cors::{AllowOrigin, Any, CorsLayer};
+use tower_http::cors::{AllowOrigin, CorsLayer};
 use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
 use tower_http::timeout::TimeoutLayer;
 use tower_http::trace::TraceLayer;
@@ -151,16 +151,8 @@ async fn auth_layer(st: axum::extract::State<AppState>, req: Request, next: Next
         .headers()
         .get(header::AUTHORIZATION)
         .and_then(|v| v.to_str().ok())
-        .and_then(|v| v.strip_prefix("Bearer "))
-        .map(str::trim);
-    // Compare with every key, without stopping early.
-    let ok = given.is_some_and(|g| {
-        st.api_keys.iter().fold(false, |acc, k| {
-            let eq = k.len() == g.len()
-                && k.bytes().zip(g.bytes()).fold(0u8, |d, (a, b)| d | (a ^ b)) == 0;
-            acc | eq
-        })
-    });
+        .and_then(bearer_token);
+    let ok = given.is_some_and(|g| key_matches(&st.api_keys, g));
     if ok {
         next.run(req).await
     } else {
@@ -170,6 +162,50 @@ async fn auth_layer(st: axum::extract::State<AppState>, req: Request, next: Next
             "a valid `Authorization: Bearer <api key>` header is required",
         )
         .into_response()
+    }
+}
+
+/// The token of an `Authorization: Bearer <token>` value; the scheme is case-insensitive
+/// (RFC 9110, 11.1).
+fn bearer_token(value: &str) -> Option<&str> {
+    let (scheme, token) = value.trim().split_once(char::is_whitespace)?;
+    let token = token.trim();
+    (scheme.eq_ignore_ascii_case("bearer") && !token.is_empty()).then_some(token)
+}
+
+/// Whether `given` is one of `keys`. Digests are compared, every key and every byte, so
+/// the time taken tells nothing of a key's length or of how much of it matched.
+fn key_matches(keys: &[String], given: &str) -> bool {
+    use sha2::{Digest, Sha256};
+    let g = Sha256::digest(given.as_bytes());
+    keys.iter().fold(false, |found, k| {
+        let d = Sha256::digest(k.as_bytes());
+        let diff = d
+            .iter()
+            .zip(g.iter())
+            .fold(0u8, |acc, (a, b)| acc | (a ^ b));
+        found | (diff == 0)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bearer_scheme_is_case_insensitive_and_keys_match_exactly() {
+        for v in ["Bearer k1", "bearer k1", "BEARER   k1 ", " Bearer\tk1"] {
+            assert_eq!(bearer_token(v), Some("k1"), "{v:?}");
+        }
+        for v in ["Basic k1", "Bearerk1", "Bearer ", "k1", ""] {
+            assert_eq!(bearer_token(v), None, "{v:?}");
+        }
+        let keys = vec!["k1".to_string(), "another-key".to_string()];
+        assert!(key_matches(&keys, "k1"));
+        assert!(key_matches(&keys, "another-key"));
+        for g in ["k", "k12", "K1", "", "another-kez"] {
+            assert!(!key_matches(&keys, g), "{g:?}");
+        }
     }
 }
 
@@ -218,12 +254,31 @@ pub fn router(st: AppState, cfg: &Config) -> Router {
                     .filter_map(|o| HeaderValue::from_str(o).ok()),
             )
         };
+        // Named, not `*`: the Fetch standard does not let a wildcard cover `Authorization`,
+        // so with `*` every authenticated browser call fails its preflight.
         app = app.layer(
             CorsLayer::new()
                 .allow_origin(origin)
-                .allow_methods(Any)
-                .allow_headers(Any)
-                .expose_headers([header::LOCATION, header::ETAG, header::RETRY_AFTER]),
+                .allow_methods([
+                    axum::http::Method::GET,
+                    axum::http::Method::POST,
+                    axum::http::Method::DELETE,
+                ])
+                .allow_headers([
+                    header::AUTHORIZATION,
+                    header::CONTENT_TYPE,
+                    header::IF_NONE_MATCH,
+                    header::HeaderName::from_static("idempotency-key"),
+                    header::HeaderName::from_static("x-request-id"),
+                ])
+                .expose_headers([
+                    header::LOCATION,
+                    header::ETAG,
+                    header::RETRY_AFTER,
+                    header::HeaderName::from_static("x-request-id"),
+                    header::HeaderName::from_static("idempotent-replayed"),
+                ])
+                .max_age(std::time::Duration::from_secs(600)),
         );
     }
     app.with_state(st)

@@ -114,7 +114,7 @@ pub const SLOW: &str = r#"{"tolerance": 1e-300, "max_iterations": 100000}"#;
 // ---------------------------------------------------------------- openapi
 
 pub fn openapi() -> Value {
-    let text = std::fs::read_to_string("src/service/openapi.yaml").unwrap();
+    let text = std::fs::read_to_string("openapi.yaml").unwrap();
     let y: serde_yaml::Value = serde_yaml::from_str(&text).unwrap();
     serde_json::to_value(y).unwrap()
 }

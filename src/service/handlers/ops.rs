@@ -12,40 +12,39 @@ use axum::Json;
 use serde_json::json;
 
 /// The OpenAPI 3.1 description, as written.
-pub const OPENAPI: &str = include_str!("../openapi.yaml");
+pub const OPENAPI: &str = include_str!("../../../openapi.yaml");
 
 /// `GET /healthz`: the process answers.
 pub async fn healthz() -> Response {
     Json(json!({"status": "ok"})).into_response()
 }
 
-/// `GET /readyz`: the store answers and the queue has room (503 otherwise).
+/// `GET /readyz`: this replica can serve requests (its store answers; 503 otherwise). A
+/// full queue is not unreadiness: a replica whose queue is full still answers polls and
+/// downloads, so it reports `queue_full` here, in metrics and as 429s on submit.
 pub async fn readyz(State(st): State<AppState>) -> ApiResult {
     let (store, exec) = (st.store.clone(), st.exec.clone());
-    let (has_room, queued) = blocking(move || {
+    let queued = blocking(move || {
         store.ping().map_err(|e| {
             Problem::new(
                 StatusCode::SERVICE_UNAVAILABLE,
                 "unavailable",
                 format!("store: {e}"),
             )
+            .retry_after(5)
         })?;
-        let queued = exec.queued();
-        Ok((queued < exec.limits.max_queued, queued))
+        Ok(store.count_with_status(Status::Queued)?)
     })
     .await?;
-    if !has_room {
-        return Err(Problem::new(
-            StatusCode::SERVICE_UNAVAILABLE,
-            "unavailable",
-            "the job queue is full",
-        )
-        .retry_after(st.retry_after_secs()));
-    }
-    Ok(
-        Json(json!({"status": "ready", "queued": queued, "running": st.exec.running()}))
-            .into_response(),
-    )
+    let max_queued = exec.limits.max_queued;
+    Ok(Json(json!({
+        "status": "ready",
+        "queued": queued,
+        "max_queued": max_queued,
+        "queue_full": queued >= max_queued,
+        "running": st.exec.running(),
+    }))
+    .into_response())
 }
 
 /// `GET /metrics`.
