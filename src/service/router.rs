@@ -188,27 +188,6 @@ fn key_matches(keys: &[String], given: &str) -> bool {
     })
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn bearer_scheme_is_case_insensitive_and_keys_match_exactly() {
-        for v in ["Bearer k1", "bearer k1", "BEARER   k1 ", " Bearer\tk1"] {
-            assert_eq!(bearer_token(v), Some("k1"), "{v:?}");
-        }
-        for v in ["Basic k1", "Bearerk1", "Bearer ", "k1", ""] {
-            assert_eq!(bearer_token(v), None, "{v:?}");
-        }
-        let keys = vec!["k1".to_string(), "another-key".to_string()];
-        assert!(key_matches(&keys, "k1"));
-        assert!(key_matches(&keys, "another-key"));
-        for g in ["k", "k12", "K1", "", "another-kez"] {
-            assert!(!key_matches(&keys, g), "{g:?}");
-        }
-    }
-}
-
 fn panic_to_problem(err: Box<dyn std::any::Any + Send + 'static>) -> Response {
     let msg = err
         .downcast_ref::<&str>()
@@ -282,4 +261,25 @@ pub fn router(st: AppState, cfg: &Config) -> Router {
         );
     }
     app.with_state(st)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bearer_scheme_is_case_insensitive_and_keys_match_exactly() {
+        for v in ["Bearer k1", "bearer k1", "BEARER   k1 ", " Bearer\tk1"] {
+            assert_eq!(bearer_token(v), Some("k1"), "{v:?}");
+        }
+        for v in ["Basic k1", "Bearerk1", "Bearer ", "k1", ""] {
+            assert_eq!(bearer_token(v), None, "{v:?}");
+        }
+        let keys = vec!["k1".to_string(), "another-key".to_string()];
+        assert!(key_matches(&keys, "k1"));
+        assert!(key_matches(&keys, "another-key"));
+        for g in ["k", "k12", "K1", "", "another-kez"] {
+            assert!(!key_matches(&keys, g), "{g:?}");
+        }
+    }
 }
