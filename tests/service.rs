@@ -558,6 +558,14 @@ async fn fl_mesh_job_end_to_end() {
     // The outcome is at the top level of the job, ϖ_max as measured on the download.
     assert_eq!(done["converged"], true, "{done}");
     assert!(done["stop_reason"].is_string(), "{done}");
+    assert_eq!(done["warnings"], json!([]), "{done}");
+    // The final progress is the job's end, not its last sub-step.
+    assert_eq!(done["progress"]["stage"], "succeeded", "{done}");
+    assert!(done["progress"]["ended_in"].is_string(), "{done}");
+    assert_eq!(
+        done["progress"]["max_flattenability"], done["max_flattenability"],
+        "{done}"
+    );
     let top = done["max_flattenability"].as_f64().unwrap();
     assert!(
         (top - worst).abs() <= 1e-15,
@@ -629,6 +637,15 @@ async fn fl_mesh_job_end_to_end() {
     assert_eq!(done["status"], "succeeded", "{done}");
     assert_eq!(done["converged"], false, "{done}");
     assert_eq!(done["stop_reason"], "max_iterations", "{done}");
+    let warnings = done["warnings"].as_array().unwrap();
+    assert_eq!(warnings[0]["code"], "not_converged", "{done}");
+    assert!(
+        warnings[0]["message"]
+            .as_str()
+            .unwrap()
+            .contains("max_iterations"),
+        "{done}"
+    );
     assert!(
         done["max_flattenability"].as_f64().unwrap() > 1e-12,
         "{done}"
@@ -1387,7 +1404,21 @@ async fn cancel_full_queue_time_limit() {
         .await
         .unwrap();
     assert_eq!(r.status(), 202);
-    assert_eq!(json_of(r, "Job").await["status"], "cancelled");
+    let cancelled = json_of(r, "Job").await;
+    assert_eq!(cancelled["status"], "cancelled");
+    // No results, and the job says why; a retried cancel is 200 with the same job.
+    assert_eq!(
+        cancelled["error"]["type"], "/problems/cancelled",
+        "{cancelled}"
+    );
+    assert_eq!(cancelled["progress"]["stage"], "cancelled", "{cancelled}");
+    let r = c
+        .post(s.url(&format!("/v1/jobs/{}/cancel", b["id"].as_str().unwrap())))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(json_of(r, "Job").await["error"], cancelled["error"]);
     // cancel the running one: ends at its next iteration
     let t = Instant::now();
     let r = c

@@ -11,6 +11,48 @@ pub fn rfc3339(ms: i64) -> String {
     humantime::format_rfc3339_millis(t).to_string()
 }
 
+/// The progress of an ended job: its final state (`stage` is the status), the iteration it
+/// ended at and the stage it was in (`ended_in`), not a stale sub-step.
+fn final_progress(j: &JobRecord) -> Value {
+    let last = j.progress.as_ref();
+    let field = |k: &str| last.and_then(|p| p.get(k)).cloned();
+    let max_flattenability = match j.status {
+        Status::Succeeded => j
+            .outcome
+            .as_ref()
+            .and_then(|o| o.get("max_flattenability"))
+            .cloned(),
+        _ => field("max_flattenability"),
+    };
+    let mut p = json!({
+        "stage": j.status.as_str(),
+        "iteration": field("iteration").unwrap_or(json!(0)),
+        "updated_at": rfc3339(j.finished_at.unwrap_or(j.created_at)),
+    });
+    if let Some(v) = max_flattenability.filter(|v| !v.is_null()) {
+        p["max_flattenability"] = v;
+    }
+    if let Some(s) = field("stage") {
+        p["ended_in"] = s;
+    }
+    p
+}
+
+/// A cancelled job's `error`: why it has no results.
+fn cancelled_problem(j: &JobRecord) -> Problem {
+    let mut p = Problem::new(
+        axum::http::StatusCode::CONFLICT,
+        "cancelled",
+        if j.started_at.is_some() {
+            "the job was cancelled while it ran; it has no results"
+        } else {
+            "the job was cancelled before it started; it has no results"
+        },
+    );
+    p.title = "Cancelled".into();
+    p
+}
+
 /// The public JSON of a job. `progress` overrides the stored progress (live value).
 pub fn job_json(j: &JobRecord, progress: Option<Value>, base: &str) -> Value {
     let me = format!("{base}/v1/jobs/{}", j.id);
@@ -38,8 +80,17 @@ pub fn job_json(j: &JobRecord, progress: Option<Value>, base: &str) -> Value {
         "reference_mesh_id": j.reference_mesh_id,
         "params": j.params,
         "callback_url": j.callback_url,
-        "progress": progress.or_else(|| j.progress.clone()),
-        "error": j.error.as_ref().map(Problem::from),
+        "progress": if j.status.is_terminal() {
+            Some(final_progress(j))
+        } else {
+            progress.or_else(|| j.progress.clone())
+        },
+        "error": match (&j.error, j.status) {
+            (Some(e), _) => Some(Problem::from(e)),
+            (None, Status::Cancelled) => Some(cancelled_problem(j)),
+            (None, _) => None,
+        },
+        "warnings": outcome("warnings").unwrap_or_else(|| json!([])),
         "attempts": j.attempts,
         "converged": outcome("converged"),
         "max_flattenability": outcome("max_flattenability"),

@@ -481,13 +481,17 @@ pub async fn list_jobs(
 }
 
 /// `POST /v1/jobs/{id}/cancel`: 202 with the job (a running job stops at its next
-/// iteration); 409 when it already ended.
+/// iteration); 200 with the job when it is already cancelled (a retried cancel); 409 when it
+/// ended otherwise.
 pub async fn cancel_job(State(st): State<AppState>, Path(id): Path<String>) -> ApiResult {
     let exec = st.exec.clone();
     let id2 = id.clone();
     let r = blocking(move || Ok(exec.cancel(&id2)?)).await?;
     match r {
         None => Err(Problem::not_found("job", &id)),
+        Some(Err(j)) if j.status == Status::Cancelled => {
+            Ok((StatusCode::OK, Json(job_json(&j, None, ""))).into_response())
+        }
         Some(Err(j)) => Err(Problem::conflict(format!(
             "job `{id}` already ended ({})",
             j.status.as_str()
