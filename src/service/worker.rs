@@ -619,6 +619,40 @@ impl ExecError {
     }
 }
 
+/// What a client should know about a succeeded job before using its results (shown at the
+/// top level of the job as `warnings`): an optimiser that stopped short of its tolerance
+/// (its result is its best iterate), patterns that could not be made or have defects, and
+/// the input mesh's own warnings.
+fn job_warnings(
+    spec: &JobSpec,
+    outcome: &crate::jobs::JobOutcome,
+    input: &[crate::mesh::Warning],
+    max_flattenability: f64,
+) -> serde_json::Value {
+    let mut out = Vec::new();
+    if outcome.figures.converged() == Some(false) {
+        out.push(serde_json::json!({
+            "code": "not_converged",
+            "message": format!(
+                "{} stopped before reaching its tolerance ({}); the results are its best \
+                 iterate, ϖ_max {max_flattenability:.3e} rad",
+                spec.kind().name(),
+                outcome.figures.stop_reason().unwrap_or("no reason given"),
+            ),
+        }));
+    }
+    if let Some(why) = &outcome.patterns_unavailable {
+        out.push(serde_json::json!({"code": "patterns_unavailable", "message": why}));
+    }
+    for w in &outcome.pattern_warnings {
+        out.push(serde_json::json!({"code": "pattern", "message": w}));
+    }
+    for w in input {
+        out.push(serde_json::json!({"code": w.code, "message": w.message}));
+    }
+    serde_json::Value::Array(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -704,38 +738,4 @@ mod tests {
         assert_eq!(exec.queued(), 0);
         let _ = std::fs::remove_dir_all(&dir);
     }
-}
-
-/// What a client should know about a succeeded job before using its results (shown at the
-/// top level of the job as `warnings`): an optimiser that stopped short of its tolerance
-/// (its result is its best iterate), patterns that could not be made or have defects, and
-/// the input mesh's own warnings.
-fn job_warnings(
-    spec: &JobSpec,
-    outcome: &crate::jobs::JobOutcome,
-    input: &[crate::mesh::Warning],
-    max_flattenability: f64,
-) -> serde_json::Value {
-    let mut out = Vec::new();
-    if outcome.figures.converged() == Some(false) {
-        out.push(serde_json::json!({
-            "code": "not_converged",
-            "message": format!(
-                "{} stopped before reaching its tolerance ({}); the results are its best \
-                 iterate, ϖ_max {max_flattenability:.3e} rad",
-                spec.kind().name(),
-                outcome.figures.stop_reason().unwrap_or("no reason given"),
-            ),
-        }));
-    }
-    if let Some(why) = &outcome.patterns_unavailable {
-        out.push(serde_json::json!({"code": "patterns_unavailable", "message": why}));
-    }
-    for w in &outcome.pattern_warnings {
-        out.push(serde_json::json!({"code": "pattern", "message": w}));
-    }
-    for w in input {
-        out.push(serde_json::json!({"code": w.code, "message": w.message}));
-    }
-    serde_json::Value::Array(out)
 }
