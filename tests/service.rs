@@ -1031,6 +1031,29 @@ async fn jobs_multipart_list_etag_delete() {
         .map(|j| j["id"].as_str().unwrap().to_string())
         .collect();
     assert_eq!(seen, want, "pages of one, newest first, no gaps or repeats");
+    // Tokens are opaque and belong to their listing: not a number, refused with other filters
+    // and when made up.
+    let page = json_of(
+        c.get(s.url("/v1/jobs?page_size=1")).send().await.unwrap(),
+        "JobList",
+    )
+    .await;
+    let t = page["next_page_token"].as_str().unwrap().to_string();
+    assert!(t.parse::<i64>().is_err(), "{t}");
+    for bad in [
+        format!("status=succeeded&page_token={t}"),
+        "page_token=3".into(),
+    ] {
+        let p = problem(
+            c.get(s.url(&format!("/v1/jobs?{bad}")))
+                .send()
+                .await
+                .unwrap(),
+            422,
+        )
+        .await;
+        assert_eq!(p["field"], "page_token", "{p}");
+    }
     problem(
         c.get(s.url("/v1/jobs?status=done")).send().await.unwrap(),
         422,
@@ -1042,27 +1065,32 @@ async fn jobs_multipart_list_etag_delete() {
     )
     .await;
 
-    // ETag / 304
-    let r = c
-        .get(s.url(&format!("/v1/jobs/{id}")))
-        .send()
-        .await
-        .unwrap();
-    let etag = r.headers()["etag"].to_str().unwrap().to_string();
-    let r = c
-        .get(s.url(&format!("/v1/jobs/{id}")))
-        .header("if-none-match", &etag)
-        .send()
-        .await
-        .unwrap();
-    assert_eq!(r.status(), 304);
-    let r = c
-        .get(s.url(&format!("/v1/jobs/{id}")))
-        .header("if-none-match", "\"other\"")
-        .send()
-        .await
-        .unwrap();
-    assert_eq!(r.status(), 200);
+    // ETag / If-None-Match → 304 on every GET that has an ETag
+    for path in [
+        format!("/v1/jobs/{id}"),
+        format!("/v1/meshes/{mid}"),
+        format!("/v1/jobs/{id}/result"),
+        format!("/v1/jobs/{id}/mesh?format=obj"),
+    ] {
+        let r = c.get(s.url(&path)).send().await.unwrap();
+        assert_eq!(r.status(), 200, "{path}");
+        let etag = r.headers()["etag"].to_str().unwrap().to_string();
+        let r = c
+            .get(s.url(&path))
+            .header("if-none-match", &etag)
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 304, "{path}");
+        assert_eq!(r.headers()["etag"], etag.as_str(), "{path}");
+        let r = c
+            .get(s.url(&path))
+            .header("if-none-match", "\"other\"")
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 200, "{path}");
+    }
 
     // delete, then gone
     let r = c

@@ -1,7 +1,7 @@
 //! `/v1/jobs`: submit, poll, list, cancel, delete, download results.
 
 use super::{blocking, hex, hv, media_type, mesh_part, multipart_err, new_id, sha256_hex};
-use super::{get_mesh_rec, store_mesh, ApiResult};
+use super::{etag_matches, get_mesh_rec, json_with_etag, page_token, store_mesh, ApiResult};
 use crate::algorithms::AlgoError;
 use crate::io;
 use crate::jobs::{JobSpec, Kind, SpecError};
@@ -403,18 +403,7 @@ pub async fn get_job(
     headers: HeaderMap,
 ) -> ApiResult {
     let j = get_job_rec(&st, &id).await?;
-    let body = serde_json::to_vec(&job_json(&j, live_progress(&st, &j), "")).unwrap_or_default();
-    let etag = format!("\"{}\"", &sha256_hex(&body)[..32]);
-    let matches = headers
-        .get(header::IF_NONE_MATCH)
-        .and_then(|v| v.to_str().ok())
-        .is_some_and(|v| v.split(',').any(|t| t.trim() == etag || t.trim() == "*"));
-    let mut res = if matches {
-        StatusCode::NOT_MODIFIED.into_response()
-    } else {
-        ([(header::CONTENT_TYPE, "application/json")], body).into_response()
-    };
-    res.headers_mut().insert(header::ETAG, hv(&etag));
+    let mut res = json_with_etag(&headers, &job_json(&j, live_progress(&st, &j), ""));
     if !j.status.is_terminal() {
         res.headers_mut()
             .insert(header::RETRY_AFTER, HeaderValue::from(1));
@@ -452,12 +441,14 @@ pub async fn list_jobs(
             .filter(|n| (1..=100).contains(n))
             .ok_or_else(|| Problem::invalid("page_size", "page_size must be in 1..=100"))?,
     };
+    let listing = format!(
+        "status={}&kind={}",
+        status.map_or("", |s| s.as_str()),
+        kind.as_deref().unwrap_or("")
+    );
     let before_seq = q
         .get("page_token")
-        .map(|t| {
-            t.parse::<i64>()
-                .map_err(|_| Problem::invalid("page_token", "not a page token from this API"))
-        })
+        .map(|t| page_token::decode(t, &listing).map_err(|e| Problem::invalid("page_token", e)))
         .transpose()?;
     let filter = JobFilter {
         status,
@@ -469,7 +460,7 @@ pub async fn list_jobs(
     let mut jobs = blocking(move || Ok(store.list_jobs(&filter)?)).await?;
     let next = if jobs.len() > limit {
         jobs.truncate(limit);
-        jobs.last().map(|j| j.seq.to_string())
+        jobs.last().map(|j| page_token::encode(j.seq, &listing))
     } else {
         None
     };
@@ -514,7 +505,14 @@ pub async fn delete_job(State(st): State<AppState>, Path(id): Path<String>) -> A
     }
 }
 
-async fn artifact(st: &AppState, id: &str, name: &str, media: &str) -> ApiResult {
+/// A succeeded job's file, with a strong ETag (`If-None-Match` → 304 without reading it).
+async fn artifact(
+    st: &AppState,
+    headers: &HeaderMap,
+    id: &str,
+    name: &str,
+    media: &str,
+) -> ApiResult {
     let j = get_job_rec(st, id).await?;
     if j.status != Status::Succeeded {
         return Err(Problem::conflict(format!(
@@ -528,6 +526,16 @@ async fn artifact(st: &AppState, id: &str, name: &str, media: &str) -> ApiResult
             "not-found",
             format!("job `{id}` ({}) produced no {name}", j.kind),
         ));
+    }
+    // A succeeded job's files never change: its id and the file name identify the bytes.
+    let etag = format!(
+        "\"{}\"",
+        &sha256_hex(format!("{id}/{name}").as_bytes())[..32]
+    );
+    if etag_matches(headers, &etag) {
+        let mut res = StatusCode::NOT_MODIFIED.into_response();
+        res.headers_mut().insert(header::ETAG, hv(&etag));
+        return Ok(res);
     }
     let store = st.store.clone();
     let key = format!("jobs/{id}/{name}");
@@ -545,6 +553,7 @@ async fn artifact(st: &AppState, id: &str, name: &str, media: &str) -> ApiResult
         [
             (header::CONTENT_TYPE, media.to_string()),
             (header::CONTENT_DISPOSITION, disposition),
+            (header::ETAG, etag),
         ],
         bytes,
     )
@@ -552,8 +561,12 @@ async fn artifact(st: &AppState, id: &str, name: &str, media: &str) -> ApiResult
 }
 
 /// `GET /v1/jobs/{id}/result`: the report JSON of the output mesh (per-vertex ϖ).
-pub async fn job_result(State(st): State<AppState>, Path(id): Path<String>) -> ApiResult {
-    artifact(&st, &id, "report.json", "application/json").await
+pub async fn job_result(
+    State(st): State<AppState>,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+) -> ApiResult {
+    artifact(&st, &headers, &id, "report.json", "application/json").await
 }
 
 fn format_param(
@@ -577,6 +590,7 @@ pub async fn job_mesh(
     State(st): State<AppState>,
     Path(id): Path<String>,
     Query(q): Query<HashMap<String, String>>,
+    headers: HeaderMap,
 ) -> ApiResult {
     let f = format_param(&q, "glb", &["glb", "gltf", "obj"])?;
     let media = match f.as_str() {
@@ -597,7 +611,7 @@ pub async fn job_mesh(
             }
         },
     };
-    artifact(&st, &id, &name, media).await
+    artifact(&st, &headers, &id, &name, media).await
 }
 
 /// `GET /v1/jobs/{id}/patterns?format=json|svg|dxf` (jobs that flatten).
@@ -605,6 +619,7 @@ pub async fn job_patterns(
     State(st): State<AppState>,
     Path(id): Path<String>,
     Query(q): Query<HashMap<String, String>>,
+    headers: HeaderMap,
 ) -> ApiResult {
     let f = format_param(&q, "json", &["json", "svg", "dxf"])?;
     let media = match f.as_str() {
@@ -613,5 +628,5 @@ pub async fn job_patterns(
         _ => "image/vnd.dxf",
     };
     let name = format!("patterns.{f}");
-    artifact(&st, &id, &name, media).await
+    artifact(&st, &headers, &id, &name, media).await
 }

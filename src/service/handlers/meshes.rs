@@ -1,7 +1,8 @@
 //! `/v1/meshes`: upload, read, report, delete.
 
 use super::{
-    blocking, format_of, get_mesh_rec, hv, media_type, mesh_part, multipart_err, store_mesh,
+    blocking, format_of, get_mesh_rec, hv, json_with_etag, media_type, mesh_part, multipart_err,
+    store_mesh,
 };
 use super::{ApiResult, MESH_TYPES};
 use crate::io;
@@ -11,7 +12,6 @@ use crate::service::views::mesh_json;
 use axum::extract::{Multipart, Path, State};
 use axum::http::{header, HeaderMap, StatusCode};
 use axum::response::IntoResponse;
-use axum::Json;
 
 /// `POST /v1/meshes`.
 pub async fn upload_mesh(
@@ -49,20 +49,21 @@ pub async fn upload_mesh(
         })?;
         store_mesh(&st, bytes, format, "body").await?
     };
-    let mut res = (StatusCode::CREATED, Json(mesh_json(&rec))).into_response();
-    let h = res.headers_mut();
-    h.insert(header::LOCATION, hv(&format!("/v1/meshes/{}", rec.id)));
-    h.insert(header::ETAG, hv(&format!("\"{}\"", rec.sha256)));
+    let mut res = json_with_etag(&HeaderMap::new(), &mesh_json(&rec));
+    *res.status_mut() = StatusCode::CREATED;
+    res.headers_mut()
+        .insert(header::LOCATION, hv(&format!("/v1/meshes/{}", rec.id)));
     Ok(res)
 }
 
-/// `GET /v1/meshes/{id}`.
-pub async fn get_mesh(State(st): State<AppState>, Path(id): Path<String>) -> ApiResult {
+/// `GET /v1/meshes/{id}`, with a strong ETag and `If-None-Match` → 304.
+pub async fn get_mesh(
+    State(st): State<AppState>,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+) -> ApiResult {
     let rec = get_mesh_rec(&st, &id).await?;
-    let mut res = Json(mesh_json(&rec)).into_response();
-    res.headers_mut()
-        .insert(header::ETAG, hv(&format!("\"{}\"", rec.sha256)));
-    Ok(res)
+    Ok(json_with_etag(&headers, &mesh_json(&rec)))
 }
 
 /// `GET /v1/meshes/{id}/report`: the flattenability report, computed now.

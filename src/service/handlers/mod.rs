@@ -145,6 +145,83 @@ fn hv(s: &str) -> HeaderValue {
     HeaderValue::from_str(s).unwrap_or(HeaderValue::from_static(""))
 }
 
+/// Whether an `If-None-Match` header matches `etag` (a quoted strong tag; `W/` prefixes are
+/// compared weakly, as RFC 9110 13.1.2 asks of GET).
+fn etag_matches(headers: &HeaderMap, etag: &str) -> bool {
+    headers
+        .get(header::IF_NONE_MATCH)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|v| {
+            v.split(',').any(|t| {
+                let t = t.trim();
+                t == "*" || t.strip_prefix("W/").unwrap_or(t) == etag
+            })
+        })
+}
+
+/// A JSON representation with a strong ETag of its bytes, or 304 when the client has it.
+fn json_with_etag(headers: &HeaderMap, value: &serde_json::Value) -> Response {
+    use axum::response::IntoResponse;
+    let body = serde_json::to_vec(value).unwrap_or_default();
+    let etag = format!("\"{}\"", &sha256_hex(&body)[..32]);
+    let mut res = if etag_matches(headers, &etag) {
+        axum::http::StatusCode::NOT_MODIFIED.into_response()
+    } else {
+        ([(header::CONTENT_TYPE, "application/json")], body).into_response()
+    };
+    res.headers_mut().insert(header::ETAG, hv(&etag));
+    res
+}
+
+/// Opaque page tokens: the position (a sequence number) and the filter it was issued
+/// for, so that a token is neither made up by clients nor reused with another filter.
+mod page_token {
+    use super::sha256_hex;
+    use base64::Engine;
+
+    const B64: base64::engine::GeneralPurpose = base64::engine::general_purpose::URL_SAFE_NO_PAD;
+
+    fn fingerprint(filter: &str) -> String {
+        sha256_hex(filter.as_bytes())[..12].to_string()
+    }
+
+    /// The token after position `seq` of the listing with `filter`.
+    pub fn encode(seq: i64, filter: &str) -> String {
+        B64.encode(format!("p1:{seq}:{}", fingerprint(filter)))
+    }
+
+    /// The position a token stands for; `Err` with why it is refused.
+    pub fn decode(token: &str, filter: &str) -> Result<i64, &'static str> {
+        let raw = B64
+            .decode(token)
+            .ok()
+            .and_then(|b| String::from_utf8(b).ok())
+            .ok_or("not a page token from this API")?;
+        let mut parts = raw.splitn(3, ':');
+        let (Some("p1"), Some(seq), Some(fp)) = (parts.next(), parts.next(), parts.next()) else {
+            return Err("not a page token from this API");
+        };
+        let seq: i64 = seq.parse().map_err(|_| "not a page token from this API")?;
+        if fp != fingerprint(filter) {
+            return Err("this page token belongs to a listing with other filters");
+        }
+        Ok(seq)
+    }
+
+    #[cfg(test)]
+    mod tests {
+        #[test]
+        fn tokens_round_trip_and_are_bound_to_their_filter() {
+            let t = super::encode(42, "status=queued");
+            assert_eq!(super::decode(&t, "status=queued"), Ok(42));
+            assert!(super::decode(&t, "status=running").is_err());
+            assert!(super::decode("42", "").is_err());
+            assert!(super::decode("!!", "").is_err());
+            assert!(!t.contains("42"), "{t}");
+        }
+    }
+}
+
 async fn blocking<T: Send + 'static>(
     f: impl FnOnce() -> Result<T, Problem> + Send + 'static,
 ) -> Result<T, Problem> {
