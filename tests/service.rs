@@ -255,12 +255,14 @@ async fn meshes_upload_report_delete() {
     assert!(rep.max_flattenability > 1e-3, "a cap is not developable");
     assert_eq!(m["developable"], false);
     let id = m["id"].as_str().unwrap();
-    assert_eq!(loc, format!("/v1/meshes/{id}"));
-    let r = c.get(s.url(&loc)).send().await.unwrap();
+    // Absolute, from the Host the client used.
+    assert_eq!(loc, s.url(&format!("/v1/meshes/{id}")));
+    assert_eq!(m["links"]["self"], loc.as_str());
+    let r = c.get(&loc).send().await.unwrap();
     assert_eq!(r.headers()["etag"].to_str().unwrap(), etag);
     assert_eq!(json_of(r, "Mesh").await, m);
     let report = json_of(
-        c.get(s.url(&format!("{loc}/report"))).send().await.unwrap(),
+        c.get(format!("{loc}/report")).send().await.unwrap(),
         "Report",
     )
     .await;
@@ -341,10 +343,10 @@ async fn meshes_upload_report_delete() {
         .unwrap();
     problem(r, 413).await;
     problem(c.get(s.url("/v1/meshes/m_nope")).send().await.unwrap(), 404).await;
-    let r = c.delete(s.url(&loc)).send().await.unwrap();
+    let r = c.delete(&loc).send().await.unwrap();
     assert_eq!(r.status(), 204);
-    problem(c.get(s.url(&loc)).send().await.unwrap(), 404).await;
-    problem(c.delete(s.url(&loc)).send().await.unwrap(), 404).await;
+    problem(c.get(&loc).send().await.unwrap(), 404).await;
+    problem(c.delete(&loc).send().await.unwrap(), 404).await;
 }
 
 /// Every kind of the registry has its own end-to-end test below, named `{kind}_job_end_to_end`.
@@ -378,7 +380,11 @@ async fn report_job_end_to_end() {
     let loc = r.headers()["location"].to_str().unwrap().to_string();
     assert!(r.headers().contains_key("retry-after"));
     let j = json_of(r, "Job").await;
-    assert_eq!(loc, format!("/v1/jobs/{}", j["id"].as_str().unwrap()));
+    assert_eq!(
+        loc,
+        s.url(&format!("/v1/jobs/{}", j["id"].as_str().unwrap()))
+    );
+    assert_eq!(j["links"]["self"], loc.as_str());
     let id = j["id"].as_str().unwrap();
     let done = wait_for(&c, &s, id, &["succeeded", "failed"]).await;
     assert_eq!(done["status"], "succeeded", "{done}");
@@ -1274,6 +1280,117 @@ async fn submit_errors() {
     .await;
 }
 
+/// Every problem type the code can produce is documented, and each problem's `type` is an
+/// absolute URL that resolves to that documentation; behind a proxy the forwarded host is
+/// used, and `--public-url` wins over both.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn problem_types_are_absolute_and_documented() {
+    // Slugs in the source: `Problem::new(status, "slug", …)`, the middleware's table and the
+    // job error codes.
+    let mut used = std::collections::BTreeSet::new();
+    let mut files = vec![];
+    let mut dirs = vec![std::path::PathBuf::from("src/service")];
+    while let Some(d) = dirs.pop() {
+        for e in std::fs::read_dir(d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                dirs.push(p);
+            } else if p.extension().is_some_and(|x| x == "rs") {
+                files.push(p);
+            }
+        }
+    }
+    for f in files {
+        let text = std::fs::read_to_string(&f).unwrap();
+        for chunk in text.split("Problem::new(").skip(1) {
+            let args: String = chunk.chars().take(200).collect();
+            if let Some(q) = args.split('"').nth(1) {
+                if !q.is_empty() && q.chars().all(|c| c.is_ascii_lowercase() || c == '-') {
+                    used.insert(q.to_string());
+                }
+            }
+        }
+        for line in text.lines() {
+            let l = line.trim();
+            if let Some(rest) = l.split("=> \"").nth(1) {
+                let slug = rest.split('"').next().unwrap_or("");
+                let table = (f.ends_with("problem.rs")
+                    && l.starts_with(|c: char| c.is_ascii_digit()))
+                    || (f.ends_with("domain.rs") && l.starts_with("ErrorCode::"));
+                if table
+                    && !slug.is_empty()
+                    && slug.chars().all(|c| c.is_ascii_lowercase() || c == '-')
+                {
+                    used.insert(slug.to_string());
+                }
+            }
+        }
+    }
+    assert!(used.len() >= 15, "{used:?}");
+    let s = Server::start(&tmp("problems"), &[]);
+    let c = client();
+    for slug in &used {
+        let r = c
+            .get(s.url(&format!("/problems/{slug}")))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 200, "problem type `{slug}` is not documented");
+        assert!(r.text().await.unwrap().contains(slug.as_str()));
+    }
+    let list = c
+        .get(s.url("/problems"))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    for slug in &used {
+        assert!(list.contains(&format!("problems/{slug}")), "{slug}");
+    }
+    // A problem's type is where its documentation is.
+    let p = problem(c.get(s.url("/v1/jobs/j_nope")).send().await.unwrap(), 404).await;
+    assert_eq!(p["type"], s.url("/problems/not-found"));
+    let doc = c.get(p["type"].as_str().unwrap()).send().await.unwrap();
+    assert_eq!(doc.status(), 200);
+    // Behind a proxy: the forwarded scheme and host.
+    let r = c
+        .get(s.url("/v1/jobs/j_nope"))
+        .header("x-forwarded-proto", "https")
+        .header("x-forwarded-host", "api.example.com")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(
+        problem(r, 404).await["type"],
+        "https://api.example.com/problems/not-found"
+    );
+    drop(s);
+    let s = Server::start(
+        &tmp("problems-pub"),
+        &["--public-url", "https://fm.example.com/api/"],
+    );
+    let r = c
+        .get(s.url("/v1/jobs/j_nope"))
+        .header("x-forwarded-host", "other.example.com")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(
+        problem(r, 404).await["type"],
+        "https://fm.example.com/api/problems/not-found"
+    );
+    let m = upload(&c, &s, fixture("cylinder")).await;
+    assert_eq!(
+        m["links"]["self"],
+        format!(
+            "https://fm.example.com/api/v1/meshes/{}",
+            m["id"].as_str().unwrap()
+        )
+    );
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn api_keys() {
     let s = Server::start(
@@ -1282,7 +1399,7 @@ async fn api_keys() {
     );
     let c = client();
     let p = problem(c.get(s.url("/v1/jobs")).send().await.unwrap(), 401).await;
-    assert_eq!(p["type"], "/problems/unauthorized");
+    assert_eq!(p["type"], s.url("/problems/unauthorized"));
     let r = c
         .get(s.url("/v1/jobs"))
         .bearer_auth("wrong")
@@ -1436,7 +1553,8 @@ async fn cancel_full_queue_time_limit() {
     assert_eq!(cancelled["status"], "cancelled");
     // No results, and the job says why; a retried cancel is 200 with the same job.
     assert_eq!(
-        cancelled["error"]["type"], "/problems/cancelled",
+        cancelled["error"]["type"],
+        s.url("/problems/cancelled"),
         "{cancelled}"
     );
     assert_eq!(cancelled["progress"]["stage"], "cancelled", "{cancelled}");
@@ -1491,7 +1609,7 @@ async fn cancel_full_queue_time_limit() {
     )
     .await;
     assert_eq!(end["status"], "failed", "{end}");
-    assert_eq!(end["error"]["type"], "/problems/time-limit");
+    assert_eq!(end["error"]["type"], s.url("/problems/time-limit"));
     let took = end["attempts"].as_u64().unwrap();
     assert_eq!(took, 1);
 }
@@ -1580,7 +1698,7 @@ async fn restart_loses_nothing() {
     );
     let f = wait_for(&c, &s, &a_id, &["failed", "succeeded", "cancelled"]).await;
     assert_eq!(f["status"], "failed", "{f}");
-    assert_eq!(f["error"]["type"], "/problems/interrupted");
+    assert_eq!(f["error"]["type"], s.url("/problems/interrupted"));
 }
 
 /// A webhook reaches a receiver, which checks the Standard Webhooks signature itself.
@@ -1664,6 +1782,12 @@ async fn webhook_is_signed_and_delivered() {
     assert_eq!(v["type"], "job.succeeded");
     check("WebhookEvent", &v);
     assert_eq!(v["data"]["id"], j["id"]);
+    // Links as absolute as the submitter saw them (no public URL configured).
+    assert_eq!(
+        v["data"]["links"]["self"],
+        s.url(&format!("/v1/jobs/{}", j["id"].as_str().unwrap())),
+        "{v}"
+    );
 }
 
 fn flatmesh_client(base: &str, args: &[&str]) -> (bool, String, String) {

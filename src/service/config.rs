@@ -75,6 +75,12 @@ pub struct Config {
     /// every worker is busy.
     #[arg(long, env = "FLATMESH_WORKER_NICE", default_value_t = 10, value_parser = clap::value_parser!(i32).range(0..=19))]
     pub worker_nice: i32,
+    /// The API's public base URL (`https://flatmesh.example.com`, with a path prefix if it is
+    /// served under one) for absolute links, `Location` headers, problem types and webhook
+    /// payloads; without it they are built from each request's `Forwarded` /
+    /// `X-Forwarded-Proto` / `X-Forwarded-Host` or `Host` header.
+    #[arg(long, env = "FLATMESH_PUBLIC_URL", value_parser = parse_public_url)]
+    pub public_url: Option<String>,
     /// Bearer API keys (comma-separated); when set, every /v1 route requires one.
     #[arg(long = "api-key", env = "FLATMESH_API_KEYS", value_delimiter = ',')]
     pub api_keys: Vec<String>,
@@ -99,4 +105,16 @@ pub struct Config {
     /// Delays between webhook attempts, comma-separated (e.g. `1s,5s,30s,2m,10m`).
     #[arg(long, env = "FLATMESH_WEBHOOK_BACKOFF", value_delimiter = ',', value_parser = parse_duration, default_value = "1s,5s,30s,2m,10m")]
     pub webhook_backoff: Vec<Duration>,
+}
+
+/// An absolute http(s) URL without query or fragment, returned without its trailing `/`.
+fn parse_public_url(s: &str) -> Result<String, String> {
+    let u = url::Url::parse(s).map_err(|e| format!("not a URL: {e}"))?;
+    if !matches!(u.scheme(), "http" | "https") || u.host_str().is_none() {
+        return Err("must be an http(s) URL with a host".into());
+    }
+    if u.query().is_some() || u.fragment().is_some() {
+        return Err("must not have a query or fragment".into());
+    }
+    Ok(u.as_str().trim_end_matches('/').to_string())
 }

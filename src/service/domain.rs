@@ -115,6 +115,9 @@ pub struct JobRecord {
     pub idempotency_key: Option<String>,
     /// Hash of the request that created the job (to detect a reused key).
     pub request_hash: Option<String>,
+    /// The API's base URL as the submitting client reached it (`https://host[/prefix]`),
+    /// for the absolute links of the job's webhook when no public URL is configured.
+    pub base_url: Option<String>,
 }
 
 impl JobRecord {
@@ -140,6 +143,7 @@ impl JobRecord {
             outcome: None,
             idempotency_key: None,
             request_hash: None,
+            base_url: None,
         }
     }
 }

@@ -94,6 +94,7 @@ async fn serve_async(cfg: Config) -> Result<(), String> {
         metrics.clone(),
     );
     hooks.backoff = cfg.webhook_backoff.clone();
+    hooks.base = cfg.public_url.clone().unwrap_or_default();
     let webhooks = Arc::new(hooks);
     let workers = if cfg.workers == 0 {
         std::thread::available_parallelism().map_or(1, |n| n.get())
@@ -123,6 +124,7 @@ async fn serve_async(cfg: Config) -> Result<(), String> {
         metrics,
         webhooks,
         max_upload: cfg.max_upload,
+        public_url: cfg.public_url.as_deref().map(Arc::from),
         api_keys: Arc::new(
             cfg.api_keys
                 .iter()

@@ -85,6 +85,14 @@ impl Problem {
         self.retry_after = Some(seconds);
         self
     }
+    /// With its `type` absolute under the API's base URL (where `GET /problems/{slug}`
+    /// documents it); unchanged when `base` is empty.
+    pub fn under(mut self, base: &str) -> Problem {
+        if self.kind.starts_with('/') {
+            self.kind = format!("{base}{}", self.kind);
+        }
+        self
+    }
     /// The HTTP status.
     pub fn status_code(&self) -> StatusCode {
         StatusCode::from_u16(self.status).unwrap_or(StatusCode::INTERNAL_SERVER_ERROR)
@@ -129,6 +137,28 @@ impl From<&JobError> for Problem {
         p
     }
 }
+
+/// Every problem type the API uses: slug, title, what it means and what to do. Served as
+/// documentation at `GET /problems/{slug}`, where each problem's absolute `type` points.
+pub const TYPES: &[(&str, &str, &str)] = &[
+    ("bad-request", "Bad Request", "The request is malformed: its body is not valid JSON, not an object, or a multipart body cannot be read. Fix the request; retrying it unchanged fails again."),
+    ("unauthorized", "Unauthorized", "API keys are configured and the request has no valid `Authorization: Bearer <key>` header (the scheme is case-insensitive)."),
+    ("not-found", "Not Found", "No such route, mesh or job (it may have expired: ended jobs are kept for the retention period), or the job produced no such file."),
+    ("method-not-allowed", "Method Not Allowed", "The route exists but not with this HTTP method."),
+    ("request-timeout", "Request Timeout", "The request (an upload included) took longer than the server's request timeout."),
+    ("conflict", "Conflict", "The resource is in a state that forbids the request: results of a job that has not succeeded, a mesh still used by a queued or running job, a cancel of a job that already succeeded or failed."),
+    ("payload-too-large", "Payload Too Large", "The body is larger than the server's upload limit."),
+    ("unsupported-media-type", "Unsupported Media Type", "The body's media type is not one this route takes (meshes: model/gltf-binary, model/gltf+json, model/obj, application/octet-stream or multipart/form-data; jobs: application/json or multipart/form-data)."),
+    ("invalid-request", "Unprocessable Content", "The request is well-formed but a member is wrong: `field` names it (`kind`, `params.tolerance`, `mesh_id`, `page_token`, …) and `detail` says what is expected. For a failed job: its input mesh or parameters turned out unusable."),
+    ("queue-full", "Too Many Requests", "The job queue is full. Retry after the `Retry-After` seconds; polls and downloads are still served."),
+    ("too-many-requests", "Too Many Requests", "Too many requests; retry after the `Retry-After` seconds."),
+    ("unavailable", "Service Unavailable", "The server cannot reach its store; retry after the `Retry-After` seconds."),
+    ("internal", "Internal Server Error", "Something broke on the server's side; the log has the details (search it for the response's `x-request-id`)."),
+    ("time-limit", "Unprocessable Content", "A job ran longer than the server's job time limit and was stopped. Submit it with a looser tolerance or fewer iterations, or ask for a longer limit."),
+    ("algorithm-failed", "Unprocessable Content", "The algorithm stopped with an error on this input (`detail` says why), for example a mesh it cannot handle."),
+    ("interrupted", "Internal Server Error", "The job's process stopped while it ran, as many times as the server allows (`--max-attempts`); submit it again."),
+    ("cancelled", "Cancelled", "A client cancelled the job (before it started or while it ran); it has no results. Not an error of the job itself."),
+];
 
 /// Slug of a problem type for statuses produced by middleware (limits, timeouts, routing).
 pub fn slug_for(status: StatusCode) -> &'static str {

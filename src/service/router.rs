@@ -3,7 +3,7 @@
 //! and the middleware every response passes through.
 
 use super::config::Config;
-use super::handlers::{jobs, meshes, ops};
+use super::handlers::{base_url, jobs, meshes, ops};
 use super::problem::{self, Problem};
 use super::state::AppState;
 use super::telemetry;
@@ -80,6 +80,8 @@ fn table() -> Vec<Route> {
         route(Get, "/metrics", ops::metrics),
         route(Get, "/version", ops::version),
         route(Get, "/openapi.yaml", ops::openapi),
+        route(Get, "/problems", ops::problem_types),
+        route(Get, "/problems/{slug}", ops::problem_type),
         route(Post, "/v1/meshes", meshes::upload_mesh),
         route(Get, "/v1/meshes/{id}", meshes::get_mesh),
         route(Delete, "/v1/meshes/{id}", meshes::delete_mesh),
@@ -108,6 +110,7 @@ pub fn routes() -> Vec<(&'static str, &'static str)> {
 /// router, limits, timeouts, panics) into `application/problem+json`; count responses.
 async fn problem_layer(st: axum::extract::State<AppState>, req: Request, next: Next) -> Response {
     let path = req.uri().path().to_string();
+    let base = base_url(st.public_url.as_deref(), req.headers());
     let res = next.run(req).await;
     st.metrics.request(res.status().as_u16());
     let status = res.status();
@@ -118,10 +121,20 @@ async fn problem_layer(st: axum::extract::State<AppState>, req: Request, next: N
         .headers()
         .get(header::CONTENT_TYPE)
         .is_some_and(|v| v.as_bytes().starts_with(problem::PROBLEM_JSON.as_bytes()));
-    if is_problem {
-        return res;
-    }
     let (parts, body) = res.into_parts();
+    if is_problem {
+        // Its `type` absolute, resolving to the problem's documentation on this server.
+        let text = axum::body::to_bytes(body, 1 << 16)
+            .await
+            .unwrap_or_default();
+        let Ok(p) = serde_json::from_slice::<Problem>(&text) else {
+            return Response::from_parts(parts, axum::body::Body::from(text));
+        };
+        let body = serde_json::to_vec(&p.under(&base)).unwrap_or_default();
+        let mut out = Response::from_parts(parts, axum::body::Body::from(body));
+        out.headers_mut().remove(header::CONTENT_LENGTH);
+        return out;
+    }
     let text = axum::body::to_bytes(body, 4096).await.unwrap_or_default();
     let mut detail = String::from_utf8_lossy(&text).trim().to_string();
     if detail.is_empty() {
@@ -131,7 +144,7 @@ async fn problem_layer(st: axum::extract::State<AppState>, req: Request, next: N
             _ => status.canonical_reason().unwrap_or("error").to_string(),
         };
     }
-    let mut p = Problem::new(status, problem::slug_for(status), detail);
+    let mut p = Problem::new(status, problem::slug_for(status), detail).under(&base);
     p.instance = Some(path);
     let mut out = p.into_response();
     for (k, v) in parts.headers.iter() {
@@ -213,12 +226,13 @@ pub fn router(st: AppState, cfg: &Config) -> Router {
     let mut app = open
         .merge(keyed)
         .layer(DefaultBodyLimit::max(cfg.max_upload))
-        .layer(middleware::from_fn_with_state(st.clone(), problem_layer))
         .layer(CatchPanicLayer::custom(panic_to_problem))
         .layer(TimeoutLayer::with_status_code(
             StatusCode::REQUEST_TIMEOUT,
             cfg.request_timeout,
         ))
+        // Outside the timeout and the panic catcher, so that their answers are problems too.
+        .layer(middleware::from_fn_with_state(st.clone(), problem_layer))
         .layer(CompressionLayer::new())
         .layer(TraceLayer::new_for_http().make_span_with(telemetry::http_span))
         .layer(PropagateRequestIdLayer::x_request_id())

@@ -21,6 +21,8 @@ pub struct AppState {
     pub max_upload: usize,
     /// Bearer keys accepted on /v1 (none: open).
     pub api_keys: Arc<Vec<String>>,
+    /// `--public-url`: the base of absolute URLs (else taken from each request).
+    pub public_url: Option<Arc<str>>,
 }
 
 impl AppState {

@@ -86,8 +86,8 @@ pub fn job_json(j: &JobRecord, progress: Option<Value>, base: &str) -> Value {
             progress.or_else(|| j.progress.clone())
         },
         "error": match (&j.error, j.status) {
-            (Some(e), _) => Some(Problem::from(e)),
-            (None, Status::Cancelled) => Some(cancelled_problem(j)),
+            (Some(e), _) => Some(Problem::from(e).under(base)),
+            (None, Status::Cancelled) => Some(cancelled_problem(j).under(base)),
             (None, _) => None,
         },
         "warnings": outcome("warnings").unwrap_or_else(|| json!([])),
@@ -103,8 +103,8 @@ pub fn job_json(j: &JobRecord, progress: Option<Value>, base: &str) -> Value {
     })
 }
 
-/// The public JSON of an uploaded mesh: its summary, id, times and links.
-pub fn mesh_json(m: &MeshRecord) -> Value {
+/// The public JSON of an uploaded mesh: its summary, id, times and links (under `base`).
+pub fn mesh_json(m: &MeshRecord, base: &str) -> Value {
     let mut v = m.summary.clone();
     if let Some(o) = v.as_object_mut() {
         o.insert("id".into(), json!(m.id));
@@ -113,7 +113,10 @@ pub fn mesh_json(m: &MeshRecord) -> Value {
         o.insert("size".into(), json!(m.size));
         o.insert(
             "links".into(),
-            json!({"self": format!("/v1/meshes/{}", m.id), "report": format!("/v1/meshes/{}/report", m.id)}),
+            json!({
+                "self": format!("{base}/v1/meshes/{}", m.id),
+                "report": format!("{base}/v1/meshes/{}/report", m.id),
+            }),
         );
     }
     v

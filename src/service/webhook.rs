@@ -179,6 +179,16 @@ impl Webhooks {
         }
     }
 
+    /// The base URL of a job's links: the configured public URL, else the one its submitter
+    /// used.
+    fn base_for<'a>(&'a self, job: &'a crate::service::domain::JobRecord) -> &'a str {
+        if self.base.is_empty() {
+            job.base_url.as_deref().unwrap_or("")
+        } else {
+            &self.base
+        }
+    }
+
     /// Whether private targets are allowed.
     pub fn allow_private(&self) -> bool {
         self.allow_private
@@ -245,7 +255,7 @@ impl Webhooks {
                 let payload = serde_json::json!({
                     "type": d.event,
                     "timestamp": rfc3339(now_ms()),
-                    "data": job_json(job, None, &self.base),
+                    "data": job_json(job, None, self.base_for(job)),
                 });
                 let body = serde_json::to_vec(&payload).unwrap_or_default();
                 let msg_id = format!("msg_{}_{}", job.id, d.id);

@@ -1,7 +1,8 @@
 //! `/v1/jobs`: submit, poll, list, cancel, delete, download results.
 
 use super::{blocking, hex, hv, media_type, mesh_part, multipart_err, new_id, sha256_hex};
-use super::{etag_matches, get_mesh_rec, json_with_etag, page_token, store_mesh, ApiResult};
+use super::{etag_matches, get_mesh_rec, json_with_etag, page_token, request_base};
+use super::{store_mesh, ApiResult};
 use crate::algorithms::AlgoError;
 use crate::io;
 use crate::jobs::{JobSpec, Kind, SpecError};
@@ -133,6 +134,7 @@ pub async fn submit_job(
     request: axum::extract::Request,
 ) -> ApiResult {
     let key = idempotency_key(&headers)?;
+    let base = request_base(&st, &headers);
     let media = media_type(&headers).unwrap_or_default();
     let mut req = match media.as_str() {
         "application/json" => read_json_submit(&st, request).await?,
@@ -146,7 +148,7 @@ pub async fn submit_job(
     if let (Some(k), false) = (&key, req.uploads.is_empty()) {
         let (store, k) = (st.store.clone(), k.clone());
         if let Some(j) = blocking(move || Ok(store.find_idempotent(&k)?)).await? {
-            return submitted(&st, j, &req.hash, true);
+            return submitted(&st, &base, j, &req.hash, true);
         }
     }
     // The uploads are validated like POST /v1/meshes and then referenced by id.
@@ -159,7 +161,7 @@ pub async fn submit_job(
         }
         stored_here.push(id);
     }
-    insert_job(&st, key, req, stored_here).await
+    insert_job(&st, &base, key, req, stored_here).await
 }
 
 /// The `Idempotency-Key` header, when given.
@@ -289,6 +291,7 @@ async fn read_multipart_submit(
 /// meshes stored for a request that lost an idempotency race are deleted again.
 async fn insert_job(
     st: &AppState,
+    base: &str,
     key: Option<String>,
     req: Request,
     stored_here: Vec<String>,
@@ -304,6 +307,7 @@ async fn insert_job(
     record.callback_url = req.submit.callback_url;
     record.idempotency_key = key;
     record.request_hash = Some(req.hash.clone());
+    record.base_url = Some(base.to_string()).filter(|b| !b.is_empty());
     let (store, exec) = (st.store.clone(), st.exec.clone());
     let inserted = blocking(move || {
         // The queue is counted in the store (shared by every process): a bound, not a lock.
@@ -326,7 +330,7 @@ async fn insert_job(
             // Counting the queue for the metrics reads the store: off the async threads.
             let _ = tokio::task::spawn_blocking(move || exec.enqueued()).await;
             st.metrics.submitted();
-            submitted(st, j, &req.hash, false)
+            submitted(st, base, j, &req.hash, false)
         }
         Some(Inserted::Existing(j)) => {
             // A concurrent retry with the same key won the race: the meshes stored for this
@@ -340,13 +344,19 @@ async fn insert_job(
                 Ok(())
             })
             .await;
-            submitted(st, j, &req.hash, true)
+            submitted(st, base, j, &req.hash, true)
         }
     }
 }
 
 /// The 202 for a new or replayed job; a replay whose request differs is refused.
-fn submitted(st: &AppState, job: JobRecord, request_hash: &str, replayed: bool) -> ApiResult {
+fn submitted(
+    st: &AppState,
+    base: &str,
+    job: JobRecord,
+    request_hash: &str,
+    replayed: bool,
+) -> ApiResult {
     if replayed && job.request_hash.as_deref() != Some(request_hash) {
         return Err(Problem::invalid(
             "Idempotency-Key",
@@ -357,9 +367,9 @@ fn submitted(st: &AppState, job: JobRecord, request_hash: &str, replayed: bool) 
         .exec
         .live(&job.id)
         .and_then(|l| l.progress.lock().ok()?.clone());
-    let mut res = (StatusCode::ACCEPTED, Json(job_json(&job, live, ""))).into_response();
+    let mut res = (StatusCode::ACCEPTED, Json(job_json(&job, live, base))).into_response();
     let h = res.headers_mut();
-    h.insert(header::LOCATION, hv(&format!("/v1/jobs/{}", job.id)));
+    h.insert(header::LOCATION, hv(&format!("{base}/v1/jobs/{}", job.id)));
     h.insert(header::RETRY_AFTER, HeaderValue::from(1));
     if replayed {
         h.insert("idempotent-replayed", HeaderValue::from_static("true"));
@@ -403,7 +413,8 @@ pub async fn get_job(
     headers: HeaderMap,
 ) -> ApiResult {
     let j = get_job_rec(&st, &id).await?;
-    let mut res = json_with_etag(&headers, &job_json(&j, live_progress(&st, &j), ""));
+    let base = request_base(&st, &headers);
+    let mut res = json_with_etag(&headers, &job_json(&j, live_progress(&st, &j), &base));
     if !j.status.is_terminal() {
         res.headers_mut()
             .insert(header::RETRY_AFTER, HeaderValue::from(1));
@@ -415,6 +426,7 @@ pub async fn get_job(
 pub async fn list_jobs(
     State(st): State<AppState>,
     Query(q): Query<HashMap<String, String>>,
+    headers: HeaderMap,
 ) -> ApiResult {
     let status = q
         .get("status")
@@ -458,6 +470,7 @@ pub async fn list_jobs(
     };
     let store = st.store.clone();
     let mut jobs = blocking(move || Ok(store.list_jobs(&filter)?)).await?;
+    let base = request_base(&st, &headers);
     let next = if jobs.len() > limit {
         jobs.truncate(limit);
         jobs.last().map(|j| page_token::encode(j.seq, &listing))
@@ -466,7 +479,7 @@ pub async fn list_jobs(
     };
     let items: Vec<Value> = jobs
         .iter()
-        .map(|j| job_json(j, live_progress(&st, j), ""))
+        .map(|j| job_json(j, live_progress(&st, j), &base))
         .collect();
     Ok(Json(json!({"jobs": items, "next_page_token": next})).into_response())
 }
@@ -474,14 +487,19 @@ pub async fn list_jobs(
 /// `POST /v1/jobs/{id}/cancel`: 202 with the job (a running job stops at its next
 /// iteration); 200 with the job when it is already cancelled (a retried cancel); 409 when it
 /// ended otherwise.
-pub async fn cancel_job(State(st): State<AppState>, Path(id): Path<String>) -> ApiResult {
+pub async fn cancel_job(
+    State(st): State<AppState>,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+) -> ApiResult {
+    let base = request_base(&st, &headers);
     let exec = st.exec.clone();
     let id2 = id.clone();
     let r = blocking(move || Ok(exec.cancel(&id2)?)).await?;
     match r {
         None => Err(Problem::not_found("job", &id)),
         Some(Err(j)) if j.status == Status::Cancelled => {
-            Ok((StatusCode::OK, Json(job_json(&j, None, ""))).into_response())
+            Ok((StatusCode::OK, Json(job_json(&j, None, &base))).into_response())
         }
         Some(Err(j)) => Err(Problem::conflict(format!(
             "job `{id}` already ended ({})",
@@ -489,7 +507,7 @@ pub async fn cancel_job(State(st): State<AppState>, Path(id): Path<String>) -> A
         ))),
         Some(Ok(j)) => {
             let live = live_progress(&st, &j);
-            Ok((StatusCode::ACCEPTED, Json(job_json(&j, live, ""))).into_response())
+            Ok((StatusCode::ACCEPTED, Json(job_json(&j, live, &base))).into_response())
         }
     }
 }

@@ -2,7 +2,7 @@
 
 use super::{
     blocking, format_of, get_mesh_rec, hv, json_with_etag, media_type, mesh_part, multipart_err,
-    store_mesh,
+    request_base, store_mesh,
 };
 use super::{ApiResult, MESH_TYPES};
 use crate::io;
@@ -49,10 +49,13 @@ pub async fn upload_mesh(
         })?;
         store_mesh(&st, bytes, format, "body").await?
     };
-    let mut res = json_with_etag(&HeaderMap::new(), &mesh_json(&rec));
+    let base = request_base(&st, &headers);
+    let mut res = json_with_etag(&HeaderMap::new(), &mesh_json(&rec, &base));
     *res.status_mut() = StatusCode::CREATED;
-    res.headers_mut()
-        .insert(header::LOCATION, hv(&format!("/v1/meshes/{}", rec.id)));
+    res.headers_mut().insert(
+        header::LOCATION,
+        hv(&format!("{base}/v1/meshes/{}", rec.id)),
+    );
     Ok(res)
 }
 
@@ -63,7 +66,8 @@ pub async fn get_mesh(
     headers: HeaderMap,
 ) -> ApiResult {
     let rec = get_mesh_rec(&st, &id).await?;
-    Ok(json_with_etag(&headers, &mesh_json(&rec)))
+    let base = request_base(&st, &headers);
+    Ok(json_with_etag(&headers, &mesh_json(&rec, &base)))
 }
 
 /// `GET /v1/meshes/{id}/report`: the flattenability report, computed now.

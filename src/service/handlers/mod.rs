@@ -145,6 +145,59 @@ fn hv(s: &str) -> HeaderValue {
     HeaderValue::from_str(s).unwrap_or(HeaderValue::from_static(""))
 }
 
+/// The API's base URL for absolute links: `--public-url` when configured, else what the
+/// request says of how the client reached us (RFC 7239 `Forwarded`, then `X-Forwarded-Proto`
+/// / `X-Forwarded-Host`, then `Host`); "" (relative links) when nothing usable is said.
+pub fn base_url(public: Option<&str>, headers: &HeaderMap) -> String {
+    if let Some(p) = public {
+        return p.to_string();
+    }
+    let header = |name: &str| {
+        headers
+            .get(name)
+            .and_then(|v| v.to_str().ok())
+            .map(|v| v.split(',').next().unwrap_or("").trim().to_string())
+            .filter(|v| !v.is_empty())
+    };
+    let (mut proto, mut host) = (None, None);
+    if let Some(fwd) = header("forwarded") {
+        for pair in fwd.split(';') {
+            if let Some((k, v)) = pair.split_once('=') {
+                let v = v.trim().trim_matches('"').to_string();
+                match k.trim().to_ascii_lowercase().as_str() {
+                    "proto" => proto = Some(v),
+                    "host" => host = Some(v),
+                    _ => {}
+                }
+            }
+        }
+    }
+    let proto = proto
+        .or_else(|| header("x-forwarded-proto"))
+        .unwrap_or_else(|| "http".into())
+        .to_ascii_lowercase();
+    let Some(host) = host
+        .or_else(|| header("x-forwarded-host"))
+        .or_else(|| header("host"))
+    else {
+        return String::new();
+    };
+    // A host (and port) only: anything else would make links point elsewhere or break them.
+    let host_ok = !host.is_empty()
+        && host
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || ".-:[]_".contains(c));
+    if !matches!(proto.as_str(), "http" | "https") || !host_ok {
+        return String::new();
+    }
+    format!("{proto}://{host}")
+}
+
+/// The base URL of a request to this service (see [`base_url`]).
+fn request_base(st: &AppState, headers: &HeaderMap) -> String {
+    base_url(st.public_url.as_deref(), headers)
+}
+
 /// Whether an `If-None-Match` header matches `etag` (a quoted strong tag; `W/` prefixes are
 /// compared weakly, as RFC 9110 13.1.2 asks of GET).
 fn etag_matches(headers: &HeaderMap, etag: &str) -> bool {
@@ -237,4 +290,52 @@ async fn get_mesh_rec(st: &AppState, id: &str) -> Result<MeshRecord, Problem> {
     blocking(move || Ok(store.get_mesh(&id2)?))
         .await?
         .ok_or_else(|| Problem::not_found("mesh", id))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::base_url;
+    use axum::http::HeaderMap;
+
+    fn headers(pairs: &[(&'static str, &str)]) -> HeaderMap {
+        let mut h = HeaderMap::new();
+        for (k, v) in pairs {
+            h.insert(*k, v.parse().unwrap());
+        }
+        h
+    }
+
+    #[test]
+    fn base_url_prefers_configuration_then_forwarded_then_host() {
+        let h = headers(&[("host", "10.0.0.5:8080")]);
+        assert_eq!(
+            base_url(Some("https://api.example.com/fm"), &h),
+            "https://api.example.com/fm"
+        );
+        assert_eq!(base_url(None, &h), "http://10.0.0.5:8080");
+        let h = headers(&[
+            ("host", "10.0.0.5:8080"),
+            (
+                "forwarded",
+                "for=1.2.3.4;proto=https;host=\"api.example.com\", for=5.6.7.8",
+            ),
+        ]);
+        assert_eq!(base_url(None, &h), "https://api.example.com");
+        let h = headers(&[
+            ("host", "10.0.0.5:8080"),
+            ("x-forwarded-proto", "https"),
+            ("x-forwarded-host", "gw.example.com, inner"),
+        ]);
+        assert_eq!(base_url(None, &h), "https://gw.example.com");
+        // Nothing usable: relative links rather than wrong ones.
+        assert_eq!(base_url(None, &HeaderMap::new()), "");
+        assert_eq!(base_url(None, &headers(&[("host", "evil.com/path")])), "");
+        assert_eq!(
+            base_url(
+                None,
+                &headers(&[("host", "a.com"), ("x-forwarded-proto", "ftp")])
+            ),
+            ""
+        );
+    }
 }

@@ -3,9 +3,9 @@
 use super::{blocking, ApiResult};
 use crate::jobs::Kind;
 use crate::service::domain::Status;
-use crate::service::problem::Problem;
+use crate::service::problem::{self, Problem};
 use crate::service::state::AppState;
-use axum::extract::State;
+use axum::extract::{Path, State};
 use axum::http::{header, StatusCode};
 use axum::response::{IntoResponse, Response};
 use axum::Json;
@@ -75,4 +75,53 @@ pub async fn version() -> Response {
 /// `GET /openapi.yaml`.
 pub async fn openapi() -> Response {
     ([(header::CONTENT_TYPE, "application/yaml")], OPENAPI).into_response()
+}
+
+fn html_escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+}
+
+/// A small HTML page (problem type documentation: what a problem's `type` resolves to).
+fn page(title: &str, body: &str) -> Response {
+    let html = format!(
+        "<!doctype html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>{}</title></head>\
+         <body>{body}</body></html>",
+        html_escape(title)
+    );
+    ([(header::CONTENT_TYPE, "text/html; charset=utf-8")], html).into_response()
+}
+
+/// `GET /problems`: every problem type of the API.
+pub async fn problem_types() -> Response {
+    let items: String = problem::TYPES
+        .iter()
+        .map(|(slug, title, _)| {
+            format!(
+                "<li><a href=\"problems/{slug}\"><code>{slug}</code></a>: {}</li>",
+                html_escape(title)
+            )
+        })
+        .collect();
+    page(
+        "flatmesh problem types",
+        &format!("<h1>Problem types</h1><p>Every error of the API is an RFC 9457 problem whose <code>type</code> is one of these.</p><ul>{items}</ul>"),
+    )
+}
+
+/// `GET /problems/{slug}`: what a problem type means and what to do about it.
+pub async fn problem_type(Path(slug): Path<String>) -> ApiResult {
+    let (slug, title, text) = problem::TYPES
+        .iter()
+        .find(|(s, _, _)| *s == slug)
+        .ok_or_else(|| Problem::not_found("problem type", &slug))?;
+    Ok(page(
+        &format!("{slug}: {title}"),
+        &format!(
+            "<h1><code>{slug}</code>: {}</h1><p>{}</p><p><a href=\"../problems\">All problem types</a></p>",
+            html_escape(title),
+            html_escape(text)
+        ),
+    ))
 }

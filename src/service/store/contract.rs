@@ -187,6 +187,7 @@ fn jobs_index(s: &dyn Store, open: &dyn Fn() -> Arc<dyn Store>) {
     j.callback_url = Some("https://example.com/hook?a=b".into());
     j.idempotency_key = Some("key-1".into());
     j.request_hash = Some("h1".into());
+    j.base_url = Some("https://api.example.com/flatmesh".into());
     let Inserted::New(stored) = s.insert_job(&j).unwrap() else {
         panic!("a new key inserts");
     };

@@ -138,11 +138,12 @@ CREATE TRIGGER jobs_deleted AFTER DELETE ON jobs
   FOR EACH ROW WHEN (OLD.status <> 'queued') EXECUTE FUNCTION flatmesh_job_changed();
 ",
     ),
+    (5, "ALTER TABLE jobs ADD COLUMN base_url TEXT;"),
 ];
 
 const JOB_COLS: &str = "seq, id, kind, mesh_id, reference_mesh_id, params, callback_url, status, \
     progress, error, created_at, started_at, finished_at, expires_at, attempts, artifacts, \
-    idempotency_key, request_hash, outcome";
+    idempotency_key, request_hash, outcome, base_url";
 
 /// The channel a queued job is announced on.
 const CHANNEL: &str = "flatmesh_jobs";
@@ -211,6 +212,7 @@ fn job_from_row(r: &Row) -> Result<JobRecord, StoreError> {
         artifacts: json("artifacts", &r.try_get::<_, String>(15)?)?,
         idempotency_key: r.try_get(16)?,
         request_hash: r.try_get(17)?,
+        base_url: r.try_get(19)?,
         outcome: opt_json(18, "outcome")?,
     })
 }
@@ -468,8 +470,8 @@ impl Store for PgStore {
                     "INSERT INTO jobs (id, kind, mesh_id, reference_mesh_id, params, \
                      callback_url, status, progress, error, created_at, started_at, \
                      finished_at, expires_at, attempts, artifacts, idempotency_key, \
-                     request_hash, outcome) \
-                     VALUES ($1,$2,$3,$4,$5,$6,$7,$8,$9,$10,$11,$12,$13,$14,$15,$16,$17,$18) \
+                     request_hash, outcome, base_url) \
+                     VALUES ($1,$2,$3,$4,$5,$6,$7,$8,$9,$10,$11,$12,$13,$14,$15,$16,$17,$18,$19) \
                      ON CONFLICT (idempotency_key) DO NOTHING RETURNING seq",
                     &[
                         &j.id,
@@ -490,6 +492,7 @@ impl Store for PgStore {
                         &j.idempotency_key,
                         &j.request_hash,
                         &outcome,
+                        &j.base_url,
                     ],
                 )
                 .await?;

@@ -61,7 +61,8 @@ CREATE TABLE IF NOT EXISTS jobs (
   artifacts TEXT NOT NULL DEFAULT '[]',
   idempotency_key TEXT UNIQUE,
   request_hash TEXT,
-  outcome TEXT
+  outcome TEXT,
+  base_url TEXT
 );
 CREATE TABLE IF NOT EXISTS deliveries (
   id INTEGER PRIMARY KEY AUTOINCREMENT,
@@ -80,7 +81,7 @@ CREATE INDEX IF NOT EXISTS jobs_ref ON jobs(reference_mesh_id);
 
 const JOB_COLS: &str = "seq, id, kind, mesh_id, reference_mesh_id, params, callback_url, status, \
     progress, error, created_at, started_at, finished_at, expires_at, attempts, artifacts, \
-    idempotency_key, request_hash, outcome";
+    idempotency_key, request_hash, outcome, base_url";
 
 fn json_err(e: serde_json::Error) -> rusqlite::Error {
     rusqlite::Error::ToSqlConversionFailure(Box::new(e))
@@ -125,6 +126,7 @@ fn job_from_row(r: &rusqlite::Row<'_>) -> rusqlite::Result<JobRecord> {
         artifacts: serde_json::from_str(&artifacts).map_err(|e| bad(15, e.to_string()))?,
         idempotency_key: r.get(16)?,
         request_hash: r.get(17)?,
+        base_url: r.get(19)?,
         outcome: outcome
             .map(|p| serde_json::from_str(&p))
             .transpose()
@@ -138,6 +140,7 @@ fn job_from_row(r: &rusqlite::Row<'_>) -> rusqlite::Result<JobRecord> {
 fn add_columns(conn: &Connection) -> rusqlite::Result<()> {
     for (name, decl) in [
         ("outcome", "outcome TEXT"),
+        ("base_url", "base_url TEXT"),
         ("worker", "worker TEXT"),
         ("lease_until", "lease_until INTEGER"),
         (
@@ -326,8 +329,8 @@ impl Store for SqliteStore {
         tx.execute(
             "INSERT INTO jobs (id, kind, mesh_id, reference_mesh_id, params, callback_url, status, \
              progress, error, created_at, started_at, finished_at, expires_at, attempts, artifacts, \
-             idempotency_key, request_hash, outcome) \
-             VALUES (?1,?2,?3,?4,?5,?6,?7,?8,?9,?10,?11,?12,?13,?14,?15,?16,?17,?18)",
+             idempotency_key, request_hash, outcome, base_url) \
+             VALUES (?1,?2,?3,?4,?5,?6,?7,?8,?9,?10,?11,?12,?13,?14,?15,?16,?17,?18,?19)",
             params![
                 j.id,
                 j.kind,
@@ -347,6 +350,7 @@ impl Store for SqliteStore {
                 j.idempotency_key,
                 j.request_hash,
                 j.outcome.as_ref().map(|p| p.to_string()),
+                j.base_url,
             ],
         )?;
         let seq = tx.last_insert_rowid();
