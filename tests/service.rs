@@ -378,7 +378,8 @@ async fn report_job_end_to_end() {
         .unwrap();
     assert_eq!(r.status(), 202);
     let loc = r.headers()["location"].to_str().unwrap().to_string();
-    assert!(r.headers().contains_key("retry-after"));
+    // a report on an idle server: look again in a second
+    assert_eq!(r.headers()["retry-after"], "1");
     let j = json_of(r, "Job").await;
     assert_eq!(
         loc,
@@ -1176,6 +1177,14 @@ async fn submit_errors() {
             "params.max_iterations",
         ),
         (
+            json!({"kind": "flatten", "mesh_id": mid, "params": {"max_iterations": "9"}}),
+            "params.max_iterations",
+        ),
+        (
+            json!({"kind": "subdivide", "mesh_id": mid, "params": {"levels": -1}}),
+            "params.levels",
+        ),
+        (
             json!({"kind": "flatten", "mesh_id": mid, "params": {"bogus": 1}}),
             "params.bogus",
         ),
@@ -1224,6 +1233,11 @@ async fn submit_errors() {
         let r = c.post(s.url("/v1/jobs")).json(&body).send().await.unwrap();
         let p = problem(r, 422).await;
         assert_eq!(p["field"], field, "{body}: {p}");
+        // Said in JSON's terms, not Rust's.
+        let detail = p["detail"].as_str().unwrap();
+        for rust in ["usize", "u32", "u64", "f64", "i64", "struct ", "sequence"] {
+            assert!(!detail.contains(rust), "{body}: {detail}");
+        }
     }
     // nothing was queued by the refused requests
     let l = json_of(c.get(s.url("/v1/jobs")).send().await.unwrap(), "JobList").await;
@@ -1542,6 +1556,19 @@ async fn cancel_full_queue_time_limit() {
         now["progress"]["step_norm"].as_f64().unwrap() > 0.0,
         "{now}"
     );
+    // Retry-After follows what such jobs take: no flatten has finished here yet, so the
+    // prior (5 s) less the time it has run; a report is expected to take well under 1 s.
+    let r = c
+        .get(s.url(&format!("/v1/jobs/{a_id}")))
+        .send()
+        .await
+        .unwrap();
+    let after: u64 = r.headers()["retry-after"]
+        .to_str()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!((1..=5).contains(&after), "{after}");
     // cancel the queued one: ends at once
     let r = c
         .post(s.url(&format!("/v1/jobs/{}/cancel", b["id"].as_str().unwrap())))

@@ -136,6 +136,38 @@ impl Distance {
     }
 }
 
+/// A deserialisation message with JSON's words for Rust's types ("expected usize" →
+/// "expected a non-negative integer"): clients write JSON, not Rust.
+fn plain_types(msg: &str) -> String {
+    const WORDS: &[(&str, &str)] = &[
+        ("usize", "a non-negative integer"),
+        ("u64", "a non-negative integer"),
+        ("u32", "a non-negative integer"),
+        ("u16", "a non-negative integer"),
+        ("u8", "a non-negative integer"),
+        ("isize", "an integer"),
+        ("i64", "an integer"),
+        ("i32", "an integer"),
+        ("f64", "a number"),
+        ("f32", "a number"),
+        ("a sequence", "an array"),
+        ("a map", "an object"),
+    ];
+    let mut out = msg.to_string();
+    for (rust, json) in WORDS {
+        out = out.replace(&format!("expected {rust}"), &format!("expected {json}"));
+    }
+    // "expected struct FlattenParams" → "expected an object"
+    if let Some(i) = out.find("expected struct ") {
+        let rest = &out[i + "expected struct ".len()..];
+        let end = rest
+            .find(|c: char| !c.is_alphanumeric() && c != '_')
+            .unwrap_or(rest.len());
+        out = format!("{}expected an object{}", &out[..i], &rest[end..]);
+    }
+    out
+}
+
 /// Parse typed parameters from a JSON object, naming the offending key on failure. Parameter
 /// structs use `#[serde(deny_unknown_fields)]` so that unknown keys are refused.
 pub fn parse_params<P: DeserializeOwned>(
@@ -146,8 +178,51 @@ pub fn parse_params<P: DeserializeOwned>(
         // The path names the member at fault (`levels`, `curves[0].edge`, `fl_mesh.nope` for
         // an unknown nested field); "." is the object itself.
         let path = e.path().to_string();
-        let msg = e.inner().to_string();
+        let msg = plain_types(&e.inner().to_string());
         let key = if path == "." { String::new() } else { path };
         AlgoError::InvalidParam { key, message: msg }
     })
+}
+
+#[cfg(test)]
+mod plain_type_tests {
+    #[derive(serde::Deserialize, Debug)]
+    #[serde(deny_unknown_fields)]
+    #[allow(dead_code)]
+    struct P {
+        levels: Option<usize>,
+        tolerance: Option<f64>,
+        curves: Option<Vec<u32>>,
+    }
+
+    fn message(v: serde_json::Value) -> String {
+        let serde_json::Value::Object(o) = v else {
+            unreachable!()
+        };
+        match super::parse_params::<P>(&o) {
+            Err(super::AlgoError::InvalidParam { message, .. }) => message,
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn messages_name_json_types_not_rust_ones() {
+        let cases = [
+            (serde_json::json!({"levels": "2"}), "a non-negative integer"),
+            (serde_json::json!({"levels": -1}), "a non-negative integer"),
+            (serde_json::json!({"tolerance": "x"}), "a number"),
+            (serde_json::json!({"curves": 3}), "an array"),
+            (
+                serde_json::json!({"curves": [1.5]}),
+                "a non-negative integer",
+            ),
+        ];
+        for (v, want) in cases {
+            let m = message(v.clone());
+            assert!(m.contains(want), "{v}: {m}");
+            for rust in ["usize", "u32", "f64", "sequence", "struct"] {
+                assert!(!m.contains(rust), "{v}: {m}");
+            }
+        }
+    }
 }

@@ -13,6 +13,7 @@
 pub mod client;
 pub mod config;
 pub mod domain;
+pub mod eta;
 pub mod handlers;
 pub mod metrics;
 pub mod problem;

@@ -24,10 +24,3 @@ pub struct AppState {
     /// `--public-url`: the base of absolute URLs (else taken from each request).
     pub public_url: Option<Arc<str>>,
 }
-
-impl AppState {
-    /// A `Retry-After` estimate for a full queue: one typical job per worker.
-    pub fn retry_after_secs(&self) -> u64 {
-        5
-    }
-}

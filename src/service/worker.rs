@@ -74,6 +74,8 @@ pub struct Executor {
     /// Executor limits.
     pub limits: Limits,
     metrics: Arc<Metrics>,
+    /// Run times learnt from this process's jobs (for `Retry-After`).
+    pub eta: super::eta::Eta,
 }
 
 /// How often an idle claim loop looks for work queued by another process.
@@ -175,6 +177,7 @@ impl Executor {
             running: AtomicUsize::new(0),
             limits,
             metrics,
+            eta: Default::default(),
         });
         for k in 0..workers {
             let me = Arc::clone(&exec);
@@ -215,6 +218,11 @@ impl Executor {
     /// Whether the queue has room for another job.
     pub fn has_room(&self) -> bool {
         self.queued() < self.limits.max_queued
+    }
+    /// `Retry-After` for a full queue.
+    pub fn retry_after_full(&self) -> u64 {
+        self.eta
+            .after_full(self.limits.max_queued, self.limits.workers)
     }
 
     /// The in-memory state of a job running in this process.
@@ -543,6 +551,8 @@ impl Executor {
         let start = Instant::now();
         let outcome = (self.runner)(&spec, &input, control).map_err(ExecError::Algo)?;
         let seconds = start.elapsed().as_secs_f64();
+        self.eta
+            .record(&job.kind, input.mesh.triangles().len(), seconds);
         let rendered = artifacts::render(spec.kind(), &input.mesh, &outcome, &warnings, seconds);
         let mut names = Vec::new();
         for a in &rendered.artifacts {

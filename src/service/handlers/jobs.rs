@@ -121,7 +121,7 @@ fn queue_full(st: &AppState) -> Problem {
             st.exec.limits.max_queued
         ),
     )
-    .retry_after(st.retry_after_secs())
+    .retry_after(st.exec.retry_after_full())
 }
 
 /// `POST /v1/jobs`: JSON `{kind, mesh_id, reference_mesh_id?, params?, callback_url?}` or
@@ -148,13 +148,18 @@ pub async fn submit_job(
     if let (Some(k), false) = (&key, req.uploads.is_empty()) {
         let (store, k) = (st.store.clone(), k.clone());
         if let Some(j) = blocking(move || Ok(store.find_idempotent(&k)?)).await? {
-            return submitted(&st, &base, j, &req.hash, true);
+            let after = st.exec.eta.after_poll(&j.kind, None);
+            return submitted(&st, &base, j, &req.hash, true, after);
         }
     }
     // The uploads are validated like POST /v1/meshes and then referenced by id.
     let mut stored_here = Vec::new();
     for (field, bytes, format) in std::mem::take(&mut req.uploads) {
-        let id = store_mesh(&st, bytes, format, field).await?.id;
+        let rec = store_mesh(&st, bytes, format, field).await?;
+        if field == "mesh" {
+            req.faces = mesh_faces(&rec);
+        }
+        let id = rec.id;
         match field {
             "mesh" => req.submit.mesh_id = Some(id.clone()),
             _ => req.submit.reference_mesh_id = Some(id.clone()),
@@ -162,6 +167,11 @@ pub async fn submit_job(
         stored_here.push(id);
     }
     insert_job(&st, &base, key, req, stored_here).await
+}
+
+/// Faces of a stored mesh, from its summary.
+fn mesh_faces(rec: &crate::service::domain::MeshRecord) -> usize {
+    rec.summary["faces"].as_u64().unwrap_or(0) as usize
 }
 
 /// The `Idempotency-Key` header, when given.
@@ -185,6 +195,8 @@ struct Request {
     submit: Submit,
     uploads: Vec<(&'static str, Bytes, io::Format)>,
     hash: String,
+    /// Faces of the input mesh (for the `Retry-After` estimate).
+    faces: usize,
 }
 
 fn request_hash(mut hasher: Sha256, s: &Submit) -> String {
@@ -214,13 +226,17 @@ async fn read_json_submit(
     let submit = parse_submit(&body, false)?;
     validate_submit(st, &submit, Some(submit.reference_mesh_id.is_some()))?;
     let mut hasher = Sha256::new();
+    let mut faces = 0;
     for (field, id) in [
         ("mesh_id", &submit.mesh_id),
         ("reference_mesh_id", &submit.reference_mesh_id),
     ] {
         if let Some(id) = id {
-            if get_mesh_rec(st, id).await.is_err() {
+            let Ok(rec) = get_mesh_rec(st, id).await else {
                 return Err(Problem::invalid(field, format!("no mesh `{id}`")));
+            };
+            if field == "mesh_id" {
+                faces = mesh_faces(&rec);
             }
             hasher.update(format!("{field}={id};"));
         }
@@ -230,6 +246,7 @@ async fn read_json_submit(
         submit,
         uploads: vec![],
         hash,
+        faces,
     })
 }
 
@@ -284,6 +301,7 @@ async fn read_multipart_submit(
         submit,
         uploads,
         hash,
+        faces: 0,
     })
 }
 
@@ -311,26 +329,32 @@ async fn insert_job(
     let (store, exec) = (st.store.clone(), st.exec.clone());
     let inserted = blocking(move || {
         // The queue is counted in the store (shared by every process): a bound, not a lock.
-        if !exec.has_room() {
+        let queued = exec.queued();
+        if queued >= exec.limits.max_queued {
             // A full queue still answers a replayed request with its job.
             if let Some(k) = &record.idempotency_key {
                 if let Some(j) = store.find_idempotent(k)? {
-                    return Ok(Some(Inserted::Existing(j)));
+                    return Ok((Some(Inserted::Existing(j)), queued));
                 }
             }
-            return Ok(None);
+            return Ok((None, queued));
         }
-        Ok(Some(store.insert_job(&record)?))
+        Ok((Some(store.insert_job(&record)?), queued))
     })
     .await;
-    match inserted? {
+    let (inserted, queued) = inserted?;
+    let retry =
+        st.exec
+            .eta
+            .after_submit(&req.submit.kind, req.faces, queued, st.exec.limits.workers);
+    match inserted {
         None => Err(queue_full(st)),
         Some(Inserted::New(j)) => {
             let exec = st.exec.clone();
             // Counting the queue for the metrics reads the store: off the async threads.
             let _ = tokio::task::spawn_blocking(move || exec.enqueued()).await;
             st.metrics.submitted();
-            submitted(st, base, j, &req.hash, false)
+            submitted(st, base, j, &req.hash, false, retry)
         }
         Some(Inserted::Existing(j)) => {
             // A concurrent retry with the same key won the race: the meshes stored for this
@@ -344,7 +368,7 @@ async fn insert_job(
                 Ok(())
             })
             .await;
-            submitted(st, base, j, &req.hash, true)
+            submitted(st, base, j, &req.hash, true, retry)
         }
     }
 }
@@ -356,6 +380,7 @@ fn submitted(
     job: JobRecord,
     request_hash: &str,
     replayed: bool,
+    retry_after: u64,
 ) -> ApiResult {
     if replayed && job.request_hash.as_deref() != Some(request_hash) {
         return Err(Problem::invalid(
@@ -370,7 +395,7 @@ fn submitted(
     let mut res = (StatusCode::ACCEPTED, Json(job_json(&job, live, base))).into_response();
     let h = res.headers_mut();
     h.insert(header::LOCATION, hv(&format!("{base}/v1/jobs/{}", job.id)));
-    h.insert(header::RETRY_AFTER, HeaderValue::from(1));
+    h.insert(header::RETRY_AFTER, HeaderValue::from(retry_after));
     if replayed {
         h.insert("idempotent-replayed", HeaderValue::from_static("true"));
     }
@@ -416,8 +441,12 @@ pub async fn get_job(
     let base = request_base(&st, &headers);
     let mut res = json_with_etag(&headers, &job_json(&j, live_progress(&st, &j), &base));
     if !j.status.is_terminal() {
+        let running_for = (j.status == Status::Running)
+            .then(|| j.started_at.map(|t| (now_ms() - t) as f64 / 1e3))
+            .flatten();
+        let after = st.exec.eta.after_poll(&j.kind, running_for);
         res.headers_mut()
-            .insert(header::RETRY_AFTER, HeaderValue::from(1));
+            .insert(header::RETRY_AFTER, HeaderValue::from(after));
     }
     Ok(res)
 }
