@@ -343,6 +343,50 @@ async fn meshes_upload_report_delete() {
         .unwrap();
     problem(r, 413).await;
     problem(c.get(s.url("/v1/meshes/m_nope")).send().await.unwrap(), 404).await;
+    // The same bytes again: the same mesh, 200 instead of 201, nothing stored twice.
+    let again = c
+        .post(s.url("/v1/meshes"))
+        .header("content-type", "model/obj")
+        .body(bytes.clone())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(again.status(), 200);
+    assert_eq!(again.headers()["location"], loc.as_str());
+    assert_eq!(json_of(again, "Mesh").await["id"], id);
+    // Listing: newest first, in pages.
+    let other = upload(&c, &s, fixture("cylinder")).await;
+    let page = json_of(
+        c.get(s.url("/v1/meshes?page_size=1")).send().await.unwrap(),
+        "MeshList",
+    )
+    .await;
+    assert_eq!(page["meshes"][0]["id"], other["id"], "{page}");
+    let token = page["next_page_token"].as_str().unwrap();
+    let page = json_of(
+        c.get(s.url(&format!("/v1/meshes?page_size=100&page_token={token}")))
+            .send()
+            .await
+            .unwrap(),
+        "MeshList",
+    )
+    .await;
+    let listed: Vec<&str> = page["meshes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|m| m["id"].as_str().unwrap())
+        .collect();
+    assert!(listed.contains(&id), "{page}");
+    let p = problem(
+        c.get(s.url("/v1/meshes?page_token=xyz"))
+            .send()
+            .await
+            .unwrap(),
+        422,
+    )
+    .await;
+    assert_eq!(p["field"], "page_token");
     let r = c.delete(&loc).send().await.unwrap();
     assert_eq!(r.status(), 204);
     problem(c.get(&loc).send().await.unwrap(), 404).await;
@@ -1959,6 +2003,16 @@ async fn retention_cors_compression() {
         !s.dir.join(format!("blobs/jobs/{id}")).exists(),
         "artifacts deleted"
     );
+    // The upload goes too once no job uses it and it is older than the retention period.
+    let mesh_url = s.url(&format!("/v1/meshes/{}", m["id"].as_str().unwrap()));
+    let t = Instant::now();
+    while c.get(&mesh_url).send().await.unwrap().status() != 404 {
+        assert!(
+            t.elapsed() < Duration::from_secs(10),
+            "unused upload not expired"
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
     let r = c
         .get(s.url("/v1/jobs"))
         .header("origin", "https://cad.example")

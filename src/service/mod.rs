@@ -143,7 +143,9 @@ async fn serve_async(cfg: Config) -> Result<(), String> {
             tick.tick().await;
             let ex = sweeper.clone();
             match tokio::task::spawn_blocking(move || ex.sweep()).await {
-                Ok(Ok(n)) if n > 0 => tracing::info!(n, "expired jobs deleted"),
+                Ok(Ok((jobs, meshes))) if jobs + meshes > 0 => {
+                    tracing::info!(jobs, meshes, "expired jobs and unused uploads deleted")
+                }
                 Ok(Err(e)) => tracing::error!(error = %e, "sweep failed"),
                 _ => {}
             }

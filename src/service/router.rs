@@ -83,6 +83,7 @@ fn table() -> Vec<Route> {
         route(Get, "/problems", ops::problem_types),
         route(Get, "/problems/{slug}", ops::problem_type),
         route(Post, "/v1/meshes", meshes::upload_mesh),
+        route(Get, "/v1/meshes", meshes::list_meshes),
         route(Get, "/v1/meshes/{id}", meshes::get_mesh),
         route(Delete, "/v1/meshes/{id}", meshes::delete_mesh),
         route(Get, "/v1/meshes/{id}/report", meshes::mesh_report),

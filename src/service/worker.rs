@@ -593,14 +593,21 @@ impl Executor {
             .map_err(|e| ExecError::Input(JobError::invalid(field, format!("mesh `{id}`: {e}"))))
     }
 
-    /// Delete expired results (called periodically).
-    pub fn sweep(&self) -> Result<usize, StoreError> {
+    /// Delete expired results, then uploads that no job uses and that are older than the
+    /// retention period (called periodically). How many of each went.
+    pub fn sweep(&self) -> Result<(usize, usize), StoreError> {
         let expired = self.store.expired_jobs(now_ms())?;
         for j in &expired {
             self.store.delete_blobs(&format!("jobs/{}", j.id))?;
             self.store.delete_job(&j.id)?;
         }
-        Ok(expired.len())
+        let meshes = self
+            .store
+            .delete_unused_meshes(now_ms() - self.retention_ms())?;
+        for id in &meshes {
+            self.store.delete_blobs(&format!("meshes/{id}"))?;
+        }
+        Ok((expired.len(), meshes.len()))
     }
 
     /// Delete a job: a running job is cancelled first; its row and artifacts go.

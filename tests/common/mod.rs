@@ -193,7 +193,8 @@ pub async fn upload(c: &reqwest::Client, s: &Server, bytes: Vec<u8>) -> Value {
         .send()
         .await
         .unwrap();
-    assert_eq!(r.status(), 201);
+    // 200: these bytes were uploaded before, the stored mesh.
+    assert!([200, 201].contains(&r.status().as_u16()), "{}", r.status());
     json_of(r, "Mesh").await
 }
 

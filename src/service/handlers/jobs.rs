@@ -1,7 +1,7 @@
 //! `/v1/jobs`: submit, poll, list, cancel, delete, download results.
 
 use super::{blocking, hex, hv, media_type, mesh_part, multipart_err, new_id, sha256_hex};
-use super::{etag_matches, get_mesh_rec, json_with_etag, page_token, request_base};
+use super::{etag_matches, get_mesh_rec, json_with_etag, page_size, page_token, request_base};
 use super::{store_mesh, ApiResult};
 use crate::algorithms::AlgoError;
 use crate::io;
@@ -155,7 +155,7 @@ pub async fn submit_job(
     // The uploads are validated like POST /v1/meshes and then referenced by id.
     let mut stored_here = Vec::new();
     for (field, bytes, format) in std::mem::take(&mut req.uploads) {
-        let rec = store_mesh(&st, bytes, format, field).await?;
+        let (rec, created) = store_mesh(&st, bytes, format, field).await?;
         if field == "mesh" {
             req.faces = mesh_faces(&rec);
         }
@@ -164,7 +164,9 @@ pub async fn submit_job(
             "mesh" => req.submit.mesh_id = Some(id.clone()),
             _ => req.submit.reference_mesh_id = Some(id.clone()),
         }
-        stored_here.push(id);
+        if created {
+            stored_here.push(id);
+        }
     }
     insert_job(&st, &base, key, req, stored_here).await
 }
@@ -474,14 +476,7 @@ pub async fn list_jobs(
             return Err(Problem::invalid("kind", format!("unknown job kind `{k}`")));
         }
     }
-    let limit = match q.get("page_size") {
-        None => 20,
-        Some(s) => s
-            .parse::<usize>()
-            .ok()
-            .filter(|n| (1..=100).contains(n))
-            .ok_or_else(|| Problem::invalid("page_size", "page_size must be in 1..=100"))?,
-    };
+    let limit = page_size(&q)?;
     let listing = format!(
         "status={}&kind={}",
         status.map_or("", |s| s.as_str()),

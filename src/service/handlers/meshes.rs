@@ -2,16 +2,17 @@
 
 use super::{
     blocking, format_of, get_mesh_rec, hv, json_with_etag, media_type, mesh_part, multipart_err,
-    request_base, store_mesh,
+    page_size, page_token, request_base, store_mesh,
 };
 use super::{ApiResult, MESH_TYPES};
 use crate::io;
 use crate::service::problem::Problem;
 use crate::service::state::AppState;
 use crate::service::views::mesh_json;
-use axum::extract::{Multipart, Path, State};
+use axum::extract::{Multipart, Path, Query, State};
 use axum::http::{header, HeaderMap, StatusCode};
 use axum::response::IntoResponse;
+use std::collections::HashMap;
 
 /// `POST /v1/meshes`.
 pub async fn upload_mesh(
@@ -49,14 +50,50 @@ pub async fn upload_mesh(
         })?;
         store_mesh(&st, bytes, format, "body").await?
     };
+    let (rec, created) = rec;
     let base = request_base(&st, &headers);
     let mut res = json_with_etag(&HeaderMap::new(), &mesh_json(&rec, &base));
-    *res.status_mut() = StatusCode::CREATED;
+    // The same bytes again: the mesh already stored, 200 rather than 201.
+    if created {
+        *res.status_mut() = StatusCode::CREATED;
+    }
     res.headers_mut().insert(
         header::LOCATION,
         hv(&format!("{base}/v1/meshes/{}", rec.id)),
     );
     Ok(res)
+}
+
+/// `GET /v1/meshes?page_size=&page_token=`, newest first.
+pub async fn list_meshes(
+    State(st): State<AppState>,
+    Query(q): Query<HashMap<String, String>>,
+    headers: HeaderMap,
+) -> ApiResult {
+    let limit = page_size(&q)?;
+    let after = q
+        .get("page_token")
+        .map(|t| {
+            page_token::decode_position(t, "meshes").map_err(|e| Problem::invalid("page_token", e))
+        })
+        .transpose()?;
+    let store = st.store.clone();
+    let mut meshes = blocking(move || {
+        let after = after.as_ref().map(|(at, id)| (*at, id.as_str()));
+        Ok(store.list_meshes(after, limit + 1)?)
+    })
+    .await?;
+    let next = if meshes.len() > limit {
+        meshes.truncate(limit);
+        meshes
+            .last()
+            .map(|m| page_token::encode_position(m.created_at, &m.id, "meshes"))
+    } else {
+        None
+    };
+    let base = request_base(&st, &headers);
+    let items: Vec<serde_json::Value> = meshes.iter().map(|m| mesh_json(m, &base)).collect();
+    Ok(axum::Json(serde_json::json!({"meshes": items, "next_page_token": next})).into_response())
 }
 
 /// `GET /v1/meshes/{id}`, with a strong ETag and `If-None-Match` → 304.

@@ -60,14 +60,21 @@ fn format_of(media: &str, filename: Option<&str>, bytes: &[u8]) -> Option<io::Fo
 
 const MESH_TYPES: &str = "model/gltf-binary, model/gltf+json, model/obj or multipart/form-data";
 
-/// Parse, validate and store a mesh; `field` names it in errors.
+/// Parse, validate and store a mesh; `field` names it in errors. Bytes already stored (the
+/// same SHA-256) are not parsed or stored again: the earlier upload is returned, with
+/// `false` for "not created here".
 async fn store_mesh(
     st: &AppState,
     bytes: Bytes,
     format: io::Format,
     field: &str,
-) -> Result<MeshRecord, Problem> {
+) -> Result<(MeshRecord, bool), Problem> {
     let field_owned = field.to_string();
+    let sha256 = sha256_hex(&bytes);
+    let (store, sha) = (st.store.clone(), sha256.clone());
+    if let Some(existing) = blocking(move || Ok(store.find_mesh_by_sha256(&sha)?)).await? {
+        return Ok((existing, false));
+    }
     let parsed = tokio::task::spawn_blocking(move || {
         let r = io::load(&bytes, format).map(|(mesh, warnings)| {
             let report = crate::report::Report::compute(&mesh, &warnings);
@@ -97,7 +104,7 @@ async fn store_mesh(
         created_at: now_ms(),
         format: format.extension().to_string(),
         size: bytes.len() as u64,
-        sha256: sha256_hex(&bytes),
+        sha256,
         summary,
     };
     let store = st.store.clone();
@@ -109,7 +116,7 @@ async fn store_mesh(
     .await
     .map_err(|e| Problem::internal(e.to_string()))??;
     st.metrics.uploaded();
-    Ok(rec)
+    Ok((rec, true))
 }
 
 fn multipart_err(e: axum::extract::multipart::MultipartError) -> Problem {
@@ -192,6 +199,18 @@ pub fn base_url(public: Option<&str>, headers: &HeaderMap) -> String {
         return String::new();
     }
     format!("{proto}://{host}")
+}
+
+/// The `page_size` query parameter of a listing: 1–100, default 20.
+fn page_size(q: &std::collections::HashMap<String, String>) -> Result<usize, Problem> {
+    match q.get("page_size") {
+        None => Ok(20),
+        Some(s) => s
+            .parse::<usize>()
+            .ok()
+            .filter(|n| (1..=100).contains(n))
+            .ok_or_else(|| Problem::invalid("page_size", "page_size must be in 1..=100")),
+    }
 }
 
 /// The base URL of a request to this service (see [`base_url`]).

@@ -10,27 +10,50 @@ fn fingerprint(filter: &str) -> String {
     sha256_hex(filter.as_bytes())[..12].to_string()
 }
 
-/// The token after position `seq` of the listing with `filter`.
-pub fn encode(seq: i64, filter: &str) -> String {
-    B64.encode(format!("p1:{seq}:{}", fingerprint(filter)))
+const NOT_OURS: &str = "not a page token from this API";
+
+/// A token for position `pos` (no `:` in it) of the listing with `filter`.
+fn encode_raw(pos: &str, filter: &str) -> String {
+    B64.encode(format!("p1:{}:{pos}", fingerprint(filter)))
 }
 
 /// The position a token stands for; `Err` with why it is refused.
-pub fn decode(token: &str, filter: &str) -> Result<i64, &'static str> {
+fn decode_raw(token: &str, filter: &str) -> Result<String, &'static str> {
     let raw = B64
         .decode(token)
         .ok()
         .and_then(|b| String::from_utf8(b).ok())
-        .ok_or("not a page token from this API")?;
+        .ok_or(NOT_OURS)?;
     let mut parts = raw.splitn(3, ':');
-    let (Some("p1"), Some(seq), Some(fp)) = (parts.next(), parts.next(), parts.next()) else {
-        return Err("not a page token from this API");
+    let (Some("p1"), Some(fp), Some(pos)) = (parts.next(), parts.next(), parts.next()) else {
+        return Err(NOT_OURS);
     };
-    let seq: i64 = seq.parse().map_err(|_| "not a page token from this API")?;
     if fp != fingerprint(filter) {
         return Err("this page token belongs to a listing with other filters");
     }
-    Ok(seq)
+    Ok(pos.to_string())
+}
+
+/// The token after sequence number `seq` of the listing with `filter`.
+pub fn encode(seq: i64, filter: &str) -> String {
+    encode_raw(&seq.to_string(), filter)
+}
+
+/// The sequence number a token stands for.
+pub fn decode(token: &str, filter: &str) -> Result<i64, &'static str> {
+    decode_raw(token, filter)?.parse().map_err(|_| NOT_OURS)
+}
+
+/// The token after the item created at `at` with id `id` (ids have no `:`).
+pub fn encode_position(at: i64, id: &str, filter: &str) -> String {
+    encode_raw(&format!("{at}/{id}"), filter)
+}
+
+/// The `(created_at, id)` a token stands for.
+pub fn decode_position(token: &str, filter: &str) -> Result<(i64, String), &'static str> {
+    let pos = decode_raw(token, filter)?;
+    let (at, id) = pos.split_once('/').ok_or(NOT_OURS)?;
+    Ok((at.parse().map_err(|_| NOT_OURS)?, id.to_string()))
 }
 
 #[cfg(test)]

@@ -175,6 +175,50 @@ fn meshes_and_blobs(s: &dyn Store) {
     assert!(s.delete_job("j_m1").unwrap());
     assert!(s.delete_mesh("m_1").unwrap());
     assert!(!s.delete_mesh("m_1").unwrap());
+    meshes_index(s);
+}
+
+/// Listing (newest first, paged by position), lookup by content, and unused uploads.
+fn meshes_index(s: &dyn Store) {
+    let mesh = |id: &str, created_at: i64, sha: &str| MeshRecord {
+        id: id.into(),
+        created_at,
+        format: "obj".into(),
+        size: 3,
+        sha256: sha.repeat(64),
+        summary: serde_json::json!({"faces": 1}),
+    };
+    let ids = |v: Vec<MeshRecord>| v.into_iter().map(|m| m.id).collect::<Vec<_>>();
+    for m in [
+        mesh("m_a", 10, "a"),
+        mesh("m_b", 20, "b"),
+        mesh("m_c", 20, "a"),
+    ] {
+        s.insert_mesh(&m).unwrap();
+    }
+    assert_eq!(ids(s.list_meshes(None, 10).unwrap()), ["m_c", "m_b", "m_a"]);
+    assert_eq!(ids(s.list_meshes(None, 1).unwrap()), ["m_c"]);
+    assert_eq!(ids(s.list_meshes(Some((20, "m_c")), 1).unwrap()), ["m_b"]);
+    assert_eq!(ids(s.list_meshes(Some((20, "m_b")), 5).unwrap()), ["m_a"]);
+    assert!(s.list_meshes(Some((10, "m_a")), 5).unwrap().is_empty());
+    // the same bytes: the oldest upload
+    assert_eq!(
+        s.find_mesh_by_sha256(&"a".repeat(64)).unwrap().unwrap(),
+        mesh("m_a", 10, "a")
+    );
+    assert!(s.find_mesh_by_sha256(&"f".repeat(64)).unwrap().is_none());
+    // unused: uploaded before the cut-off and named by no job (of any status)
+    let mut j = JobRecord::queued("j_uses_a", "report", "m_b", 30);
+    j.reference_mesh_id = Some("m_a".into());
+    j.status = Status::Succeeded;
+    s.insert_job(&j).unwrap();
+    assert_eq!(s.delete_unused_meshes(100).unwrap(), ["m_c"]);
+    assert!(s.get_mesh("m_c").unwrap().is_none());
+    assert!(s.delete_unused_meshes(100).unwrap().is_empty());
+    assert!(s.delete_job("j_uses_a").unwrap());
+    assert_eq!(s.delete_unused_meshes(15).unwrap(), ["m_a"]);
+    assert_eq!(s.delete_unused_meshes(100).unwrap(), ["m_b"]);
+    assert!(s.list_meshes(None, 10).unwrap().is_empty());
 }
 
 fn jobs_index(s: &dyn Store, open: &dyn Fn() -> Arc<dyn Store>) {

@@ -82,6 +82,18 @@ pub trait Store: Blobs {
     fn delete_mesh(&self, id: &str) -> Result<bool, StoreError>;
     /// Whether a queued or running job uses the mesh.
     fn mesh_in_use(&self, id: &str) -> Result<bool, StoreError>;
+    /// Meshes newest first (by upload time, then id), at most `limit`, after the position
+    /// `after` (the `(created_at, id)` of the previous page's last mesh).
+    fn list_meshes(
+        &self,
+        after: Option<(i64, &str)>,
+        limit: usize,
+    ) -> Result<Vec<MeshRecord>, StoreError>;
+    /// A stored mesh with exactly these bytes (hex SHA-256), the oldest when several.
+    fn find_mesh_by_sha256(&self, sha256: &str) -> Result<Option<MeshRecord>, StoreError>;
+    /// Delete the meshes uploaded before `before` that no job refers to (expired uploads),
+    /// each checked and deleted in one statement; their ids (their blobs are the caller's).
+    fn delete_unused_meshes(&self, before: i64) -> Result<Vec<String>, StoreError>;
     /// Insert a job, or return the one with the same idempotency key. `seq` is assigned.
     fn insert_job(&self, j: &JobRecord) -> Result<Inserted, StoreError>;
     /// The job created with an idempotency key.

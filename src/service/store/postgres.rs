@@ -138,7 +138,12 @@ CREATE TRIGGER jobs_deleted AFTER DELETE ON jobs
   FOR EACH ROW WHEN (OLD.status <> 'queued') EXECUTE FUNCTION flatmesh_job_changed();
 ",
     ),
-    (5, "ALTER TABLE jobs ADD COLUMN base_url TEXT;"),
+    (
+        5,
+        "ALTER TABLE jobs ADD COLUMN base_url TEXT;
+CREATE INDEX meshes_sha256 ON meshes(sha256);
+CREATE INDEX meshes_created ON meshes(created_at, id);",
+    ),
 ];
 
 const JOB_COLS: &str = "seq, id, kind, mesh_id, reference_mesh_id, params, callback_url, status, \
@@ -360,6 +365,38 @@ impl PgStore {
         })
     }
 
+    async fn select_meshes(
+        &self,
+        sql_where: &str,
+        args: &[&(dyn tokio_postgres::types::ToSql + Sync)],
+        tail: &str,
+    ) -> Result<Vec<MeshRecord>, StoreError> {
+        let c = self.pool.get().await?;
+        let st = c
+            .prepare_cached(&format!(
+                "SELECT id, created_at, format, size, sha256, summary FROM meshes \
+                 WHERE {sql_where} {tail}"
+            ))
+            .await?;
+        c.query(&st, args)
+            .await?
+            .iter()
+            .map(|r| {
+                let size: i64 = r.try_get(3)?;
+                let summary: String = r.try_get(5)?;
+                Ok(MeshRecord {
+                    id: r.try_get(0)?,
+                    created_at: r.try_get(1)?,
+                    format: r.try_get(2)?,
+                    size: size as u64,
+                    sha256: r.try_get(4)?,
+                    summary: serde_json::from_str(&summary)
+                        .map_err(|e| StoreError::Corrupt(format!("meshes.summary: {e}")))?,
+                })
+            })
+            .collect()
+    }
+
     async fn select(
         &self,
         sql_where: &str,
@@ -405,29 +442,7 @@ impl Store for PgStore {
     }
 
     fn get_mesh(&self, id: &str) -> Result<Option<MeshRecord>, StoreError> {
-        self.run(async {
-            let c = self.pool.get().await?;
-            let st = c
-                .prepare_cached(
-                    "SELECT id, created_at, format, size, sha256, summary FROM meshes \
-                     WHERE id = $1",
-                )
-                .await?;
-            let Some(r) = c.query_opt(&st, &[&id]).await? else {
-                return Ok(None);
-            };
-            let size: i64 = r.try_get(3)?;
-            let summary: String = r.try_get(5)?;
-            Ok(Some(MeshRecord {
-                id: r.try_get(0)?,
-                created_at: r.try_get(1)?,
-                format: r.try_get(2)?,
-                size: size as u64,
-                sha256: r.try_get(4)?,
-                summary: serde_json::from_str(&summary)
-                    .map_err(|e| StoreError::Corrupt(format!("meshes.summary: {e}")))?,
-            }))
-        })
+        self.run(async { Ok(self.select_meshes("id = $1", &[&id], "").await?.pop()) })
     }
 
     fn delete_mesh(&self, id: &str) -> Result<bool, StoreError> {
@@ -450,6 +465,49 @@ impl Store for PgStore {
                 )
                 .await?;
             Ok(r.try_get(0)?)
+        })
+    }
+
+    fn list_meshes(
+        &self,
+        after: Option<(i64, &str)>,
+        limit: usize,
+    ) -> Result<Vec<MeshRecord>, StoreError> {
+        let (at, id) = (after.map(|a| a.0), after.map(|a| a.1));
+        let limit = limit as i64;
+        self.run(async {
+            self.select_meshes(
+                "($1::BIGINT IS NULL OR (created_at, id) < ($1, $2::TEXT))",
+                &[&at, &id, &limit],
+                "ORDER BY created_at DESC, id DESC LIMIT $3",
+            )
+            .await
+        })
+    }
+
+    fn find_mesh_by_sha256(&self, sha256: &str) -> Result<Option<MeshRecord>, StoreError> {
+        self.run(async {
+            Ok(self
+                .select_meshes("sha256 = $1", &[&sha256], "ORDER BY created_at, id LIMIT 1")
+                .await?
+                .pop())
+        })
+    }
+
+    fn delete_unused_meshes(&self, before: i64) -> Result<Vec<String>, StoreError> {
+        self.run(async {
+            let c = self.pool.get().await?;
+            let rows = c
+                .query(
+                    "DELETE FROM meshes m WHERE created_at < $1 AND NOT EXISTS \
+                     (SELECT 1 FROM jobs j WHERE j.mesh_id = m.id OR j.reference_mesh_id = m.id) \
+                     RETURNING id",
+                    &[&before],
+                )
+                .await?;
+            rows.iter()
+                .map(|r| r.try_get(0).map_err(StoreError::from))
+                .collect()
         })
     }
 

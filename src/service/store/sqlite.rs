@@ -77,6 +77,8 @@ CREATE INDEX IF NOT EXISTS deliveries_due ON deliveries(due_at, id);
 CREATE INDEX IF NOT EXISTS jobs_status ON jobs(status, seq);
 CREATE INDEX IF NOT EXISTS jobs_mesh ON jobs(mesh_id);
 CREATE INDEX IF NOT EXISTS jobs_ref ON jobs(reference_mesh_id);
+CREATE INDEX IF NOT EXISTS meshes_sha256 ON meshes(sha256);
+CREATE INDEX IF NOT EXISTS meshes_created ON meshes(created_at, id);
 ";
 
 const JOB_COLS: &str = "seq, id, kind, mesh_id, reference_mesh_id, params, callback_url, status, \
@@ -159,6 +161,45 @@ fn add_columns(conn: &Connection) -> rusqlite::Result<()> {
 }
 
 impl SqliteStore {
+    /// Meshes matching `sql_where` (with `tail`: order, limit), read on a reader.
+    fn select_meshes(
+        &self,
+        sql_where: &str,
+        args: &[&dyn rusqlite::ToSql],
+        tail: &str,
+    ) -> Result<Vec<MeshRecord>, StoreError> {
+        let c = self.reader();
+        let mut st = c.prepare_cached(&format!(
+            "SELECT id, created_at, format, size, sha256, summary FROM meshes \
+             WHERE {sql_where} {tail}"
+        ))?;
+        let rows = st
+            .query_map(args, |r| {
+                Ok((
+                    r.get::<_, String>(0)?,
+                    r.get::<_, i64>(1)?,
+                    r.get::<_, String>(2)?,
+                    r.get::<_, i64>(3)? as u64,
+                    r.get::<_, String>(4)?,
+                    r.get::<_, String>(5)?,
+                ))
+            })?
+            .collect::<rusqlite::Result<Vec<_>>>()?;
+        rows.into_iter()
+            .map(|(id, created_at, format, size, sha256, summary)| {
+                Ok(MeshRecord {
+                    id,
+                    created_at,
+                    format,
+                    size,
+                    sha256,
+                    summary: serde_json::from_str(&summary)
+                        .map_err(|e| StoreError::Corrupt(e.to_string()))?,
+                })
+            })
+            .collect()
+    }
+
     /// Open (creating) the store in `dir`.
     pub fn open(dir: &Path) -> Result<SqliteStore, StoreError> {
         std::fs::create_dir_all(dir).map_err(|e| StoreError::Io(dir.display().to_string(), e))?;
@@ -264,34 +305,9 @@ impl Store for SqliteStore {
     }
 
     fn get_mesh(&self, id: &str) -> Result<Option<MeshRecord>, StoreError> {
-        let c = self.reader();
-        let mut st = c.prepare_cached(
-            "SELECT id, created_at, format, size, sha256, summary FROM meshes WHERE id = ?1",
-        )?;
-        let row = st
-            .query_row([id], |r| {
-                Ok((
-                    r.get::<_, String>(0)?,
-                    r.get::<_, i64>(1)?,
-                    r.get::<_, String>(2)?,
-                    r.get::<_, i64>(3)? as u64,
-                    r.get::<_, String>(4)?,
-                    r.get::<_, String>(5)?,
-                ))
-            })
-            .optional()?;
-        row.map(|(id, created_at, format, size, sha256, summary)| {
-            Ok(MeshRecord {
-                id,
-                created_at,
-                format,
-                size,
-                sha256,
-                summary: serde_json::from_str(&summary)
-                    .map_err(|e| StoreError::Corrupt(e.to_string()))?,
-            })
-        })
-        .transpose()
+        Ok(self
+            .select_meshes("id = ?1", &[&id as &dyn rusqlite::ToSql], "")?
+            .pop())
     }
 
     fn delete_mesh(&self, id: &str) -> Result<bool, StoreError> {
@@ -309,6 +325,42 @@ impl Store for SqliteStore {
             |r| r.get(0),
         )?;
         Ok(n > 0)
+    }
+
+    fn list_meshes(
+        &self,
+        after: Option<(i64, &str)>,
+        limit: usize,
+    ) -> Result<Vec<MeshRecord>, StoreError> {
+        let (at, id) = (after.map(|a| a.0), after.map(|a| a.1));
+        self.select_meshes(
+            "(?1 IS NULL OR (created_at, id) < (?1, ?2))",
+            &[&at, &id, &(limit as i64)],
+            "ORDER BY created_at DESC, id DESC LIMIT ?3",
+        )
+    }
+
+    fn find_mesh_by_sha256(&self, sha256: &str) -> Result<Option<MeshRecord>, StoreError> {
+        Ok(self
+            .select_meshes(
+                "sha256 = ?1",
+                &[&sha256 as &dyn rusqlite::ToSql],
+                "ORDER BY created_at, id LIMIT 1",
+            )?
+            .pop())
+    }
+
+    fn delete_unused_meshes(&self, before: i64) -> Result<Vec<String>, StoreError> {
+        let c = self.conn();
+        let mut st = c.prepare_cached(
+            "DELETE FROM meshes AS m WHERE created_at < ?1 AND NOT EXISTS \
+             (SELECT 1 FROM jobs j WHERE j.mesh_id = m.id OR j.reference_mesh_id = m.id) \
+             RETURNING id",
+        )?;
+        let ids = st
+            .query_map([before], |r| r.get(0))?
+            .collect::<rusqlite::Result<Vec<String>>>()?;
+        Ok(ids)
     }
 
     fn insert_job(&self, j: &JobRecord) -> Result<Inserted, StoreError> {
