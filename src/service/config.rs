@@ -61,7 +61,7 @@ pub struct Config {
     /// Wall-clock limit of one job run, e.g. `30m`.
     #[arg(long, env = "FLATMESH_JOB_TIME_LIMIT", default_value = "1h", value_parser = parse_duration)]
     pub job_time_limit: Duration,
-    /// How long results of ended jobs are kept, e.g. `7d`.
+    /// How long results of ended jobs are kept, and uploads that no job uses, e.g. `7d`.
     #[arg(long, env = "FLATMESH_RETENTION", default_value = "7d", value_parser = parse_duration)]
     pub retention: Duration,
     /// Runs of a job interrupted by a restart before it fails.
