@@ -32,6 +32,10 @@ enum Command {
         /// Also write the mesh as GLB with ϖ as the `_FLATTENABILITY` attribute and a heat map.
         #[arg(long, value_name = "OUT.glb")]
         glb: Option<PathBuf>,
+        /// The heat map's range: `data` (1st–99th percentile of this mesh's ϖ) or `fixed`
+        /// (1e-6–1 rad, the same for every mesh, to compare meshes).
+        #[arg(long, default_value = "data", value_parser = ["data", "fixed"])]
+        heatmap: String,
     },
     /// Run a job locally, without a server, and write its results into DIR.
     ///
@@ -106,7 +110,19 @@ fn main() -> ExitCode {
         Err(e) => e.exit(),
     };
     match cli.command {
-        Command::Report { mesh, json, glb } => report(&mesh, json, glb.as_deref()),
+        Command::Report {
+            mesh,
+            json,
+            glb,
+            heatmap,
+        } => {
+            let scale = if heatmap == "fixed" {
+                io::gltf::HeatmapScale::Fixed
+            } else {
+                io::gltf::HeatmapScale::Data
+            };
+            report(&mesh, json, glb.as_deref(), scale)
+        }
         Command::Run {
             kind,
             mesh,
@@ -167,7 +183,7 @@ fn load(path: &Path) -> Result<(flatmesh::mesh::Mesh, Vec<flatmesh::mesh::Warnin
     })
 }
 
-fn report(path: &Path, json: bool, glb: Option<&Path>) -> ExitCode {
+fn report(path: &Path, json: bool, glb: Option<&Path>, scale: io::gltf::HeatmapScale) -> ExitCode {
     let (mesh, warnings) = match load(path) {
         Ok(m) => m,
         Err(code) => return code,
@@ -175,7 +191,7 @@ fn report(path: &Path, json: bool, glb: Option<&Path>) -> ExitCode {
     let report = Report::compute(&mesh, &warnings);
     if let Some(out) = glb {
         let varpi: Vec<f64> = report.per_vertex.iter().map(|v| v.flattenability).collect();
-        let bytes = io::gltf::write_glb(&mesh, Some(&varpi));
+        let bytes = io::gltf::write_glb_scaled(&mesh, Some(&varpi), &[], scale);
         if let Err(e) = std::fs::write(out, bytes) {
             eprintln!("flatmesh: cannot write {}: {e}", out.display());
             return ExitCode::FAILURE;

@@ -211,19 +211,37 @@ fn glb_follows_the_layout_rules() {
     for (i, (&a, &b)) in f.iter().zip(&varpi).enumerate() {
         assert_eq!(a, b as f32, "ϖ of vertex {i}");
     }
+    // The heat map's range comes from the data: the 1st and 99th percentiles of interior
+    // ϖ (recomputed here), at least a decade wide and never below the developable tolerance.
+    let mut interior: Vec<f64> = (0..mesh.num_vertices())
+        .filter(|&i| mesh.conn().is_interior(i as u32))
+        .map(|i| varpi[i])
+        .collect();
+    interior.sort_by(f64::total_cmp);
+    let pct = |q: f64| interior[((interior.len() - 1) as f64 * q).round() as usize];
+    let lo = pct(0.01).max(gltf::HEATMAP_MIN);
+    let hi = pct(0.99).max(10.0 * lo);
+    let scale = &root["asset"]["extras"]["flatmesh"]["heatmap"];
+    assert_eq!(scale["min"].as_f64(), Some(lo));
+    assert_eq!(scale["max"].as_f64(), Some(hi));
     let (c, _) = accessor_f32(&root, &bin, as_usize(&attrs["COLOR_0"]));
     assert!(c.iter().all(|x| (0.0..=1.0).contains(x)));
     for (i, rgb) in c.chunks(3).enumerate() {
         let expect = if mesh.conn().is_interior(i as u32) {
-            gltf::heat_color(varpi[i])
+            gltf::heat_color_in(varpi[i], (lo, hi))
         } else {
             [0.6, 0.6, 0.6]
         };
         assert_eq!(rgb, expect, "colour of vertex {i}");
     }
-    let scale = &root["asset"]["extras"]["flatmesh"]["heatmap"];
-    assert_eq!(scale["min"].as_f64(), Some(gltf::HEATMAP_MIN));
-    assert_eq!(scale["max"].as_f64(), Some(gltf::HEATMAP_MAX));
+    // A material viewers render as intended: not metallic, both sides drawn.
+    let mat = &root["materials"][0];
+    assert_eq!(mat["doubleSided"], true);
+    assert_eq!(
+        mat["pbrMetallicRoughness"]["metallicFactor"].as_f64(),
+        Some(0.0)
+    );
+    assert!(prims.iter().all(|p| p["material"] == 0));
     // Indices in range, u32, and every patch's faces present.
     for (p, prim) in prims.iter().enumerate() {
         let acc = &root["accessors"][as_usize(&prim["indices"])];
@@ -244,6 +262,48 @@ fn glb_follows_the_layout_rules() {
         assert_eq!(idx, expected, "primitive {p} indices");
         assert_eq!(prim["extras"]["patch"], mesh.patch_names()[p].as_str());
     }
+}
+
+/// The fixed scale, on request, is the same for every mesh; the data scale spreads a
+/// typical garment's ϖ (1e-3–0.3 rad) over the colours instead of showing it in one.
+#[test]
+fn heat_map_scale_from_the_data_or_fixed() {
+    let spread: Vec<f64> = (0..100)
+        .map(|k| 1e-3 * 300f64.powf(k as f64 / 99.0))
+        .collect();
+    assert_eq!(
+        gltf::heatmap_range(gltf::HeatmapScale::Fixed, &spread),
+        (gltf::HEATMAP_MIN, gltf::HEATMAP_MAX)
+    );
+    let range = gltf::heatmap_range(gltf::HeatmapScale::Data, &spread);
+    let colours = |r: (f64, f64)| {
+        spread
+            .iter()
+            .map(|&v| gltf::heat_color_in(v, r).map(|x| (x * 4.0).round() as i32))
+            .collect::<std::collections::BTreeSet<_>>()
+            .len()
+    };
+    assert!(colours(range) > 2 * colours((gltf::HEATMAP_MIN, gltf::HEATMAP_MAX)));
+    // A developable mesh: all blue, never a range narrower than a decade.
+    let flat = vec![0.0; 10];
+    let (lo, hi) = gltf::heatmap_range(gltf::HeatmapScale::Data, &flat);
+    assert_eq!(lo, gltf::HEATMAP_MIN);
+    assert!(hi >= 10.0 * lo);
+    assert_eq!(gltf::heat_color_in(0.0, (lo, hi)), [0.0, 0.0, 1.0]);
+    // Written with the fixed scale, the extras say so.
+    let mesh = flatmesh::io::load(
+        &std::fs::read("fixtures/cylinder.obj").unwrap(),
+        flatmesh::io::Format::Obj,
+    )
+    .unwrap()
+    .0;
+    let varpi = vec![0.5; mesh.num_vertices()];
+    let glb = gltf::write_glb_scaled(&mesh, Some(&varpi), &[], gltf::HeatmapScale::Fixed);
+    let json_len = u32::from_le_bytes(glb[12..16].try_into().unwrap()) as usize;
+    let root: serde_json::Value = serde_json::from_slice(&glb[20..20 + json_len]).unwrap();
+    let h = &root["asset"]["extras"]["flatmesh"]["heatmap"];
+    assert_eq!(h["range"], "fixed");
+    assert_eq!(h["max"].as_f64(), Some(gltf::HEATMAP_MAX));
 }
 
 #[test]

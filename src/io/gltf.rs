@@ -603,13 +603,47 @@ fn weld_spaces(
     (kept, triangles)
 }
 
-/// Heat-map colour of ϖ: log scale from [`HEATMAP_MIN`] (blue) through cyan, green and yellow
-/// to [`HEATMAP_MAX`] (red).
+/// How the heat map's range is chosen.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum HeatmapScale {
+    /// From the data: the 1st to the 99th percentile of ϖ at interior vertices (at least a
+    /// decade wide, never below [`HEATMAP_MIN`]), so that a typical garment, whose ϖ spans
+    /// 1e-3–0.3 rad, is not shown in one colour.
+    #[default]
+    Data,
+    /// [`HEATMAP_MIN`]–[`HEATMAP_MAX`], the same for every mesh (to compare meshes).
+    Fixed,
+}
+
+/// The heat map's `(min, max)` for `scale` over the interior vertices' ϖ.
+pub fn heatmap_range(scale: HeatmapScale, interior: &[f64]) -> (f64, f64) {
+    if scale == HeatmapScale::Fixed {
+        return (HEATMAP_MIN, HEATMAP_MAX);
+    }
+    let mut v: Vec<f64> = interior.iter().copied().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return (HEATMAP_MIN, HEATMAP_MIN * 10.0);
+    }
+    v.sort_by(f64::total_cmp);
+    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+    let lo = at(0.01).max(HEATMAP_MIN);
+    let hi = at(0.99).max(lo * 10.0);
+    (lo, hi)
+}
+
+/// Heat-map colour of ϖ on the fixed scale (see [`heat_color_in`]).
 pub fn heat_color(varpi: f64) -> [f32; 3] {
-    let t = if varpi <= HEATMAP_MIN {
+    heat_color_in(varpi, (HEATMAP_MIN, HEATMAP_MAX))
+}
+
+/// Heat-map colour of ϖ: log scale from `range.0` (blue) through cyan, green and yellow to
+/// `range.1` (red).
+pub fn heat_color_in(varpi: f64, range: (f64, f64)) -> [f32; 3] {
+    let (lo, hi) = range;
+    let t = if varpi <= lo || hi <= lo {
         0.0
     } else {
-        ((varpi / HEATMAP_MIN).log10() / (HEATMAP_MAX / HEATMAP_MIN).log10()).clamp(0.0, 1.0)
+        ((varpi / lo).log10() / (hi / lo).log10()).clamp(0.0, 1.0)
     };
     const STOPS: [[f64; 3]; 5] = [
         [0.0, 0.0, 1.0],
@@ -641,6 +675,7 @@ fn build(
     mesh: &Mesh,
     flattenability: Option<&[f64]>,
     scalars: &[VertexScalar<'_>],
+    scale: HeatmapScale,
 ) -> (serde_json::Value, Vec<u8>) {
     use serde_json::json;
     let n = mesh.num_vertices();
@@ -711,6 +746,7 @@ fn build(
     let normal = accessors.len() - 1;
 
     let mut attributes = json!({"POSITION": position, "NORMAL": normal});
+    let mut range = (HEATMAP_MIN, HEATMAP_MAX);
     if let Some(varpi) = flattenability {
         let values: Vec<f32> = (0..n)
             .map(|i| varpi.get(i).copied().unwrap_or(0.0))
@@ -720,10 +756,15 @@ fn build(
         accessors
             .push(json!({"bufferView": v, "componentType": 5126, "count": n, "type": "SCALAR"}));
         attributes["_FLATTENABILITY"] = json!(accessors.len() - 1);
+        let interior: Vec<f64> = (0..n)
+            .filter(|&i| conn.is_interior(i as u32))
+            .map(|i| varpi.get(i).copied().unwrap_or(0.0))
+            .collect();
+        range = heatmap_range(scale, &interior);
         let colors: Vec<[f32; 3]> = (0..n)
             .map(|i| {
                 if conn.is_interior(i as u32) {
-                    heat_color(varpi.get(i).copied().unwrap_or(0.0))
+                    heat_color_in(varpi.get(i).copied().unwrap_or(0.0), range)
                 } else {
                     NON_INTERIOR_COLOR
                 }
@@ -766,7 +807,7 @@ fn build(
         );
         primitives.push(
             json!({"attributes": attributes.clone(), "indices": accessors.len() - 1,
-            "mode": 4, "extras": {"patch": mesh.patch_names()[p]}}),
+            "mode": 4, "material": 0, "extras": {"patch": mesh.patch_names()[p]}}),
         );
     }
     while bin.len() % 4 != 0 {
@@ -781,8 +822,12 @@ fn build(
             "heatmap": {
                 "attribute": "COLOR_0",
                 "scale": "log10",
-                "min": HEATMAP_MIN,
-                "max": HEATMAP_MAX,
+                "range": match scale {
+                    HeatmapScale::Data => "data: 1st to 99th percentile of interior ϖ",
+                    HeatmapScale::Fixed => "fixed",
+                },
+                "min": range.0,
+                "max": range.1,
                 "colors": "blue at or below min (developable), cyan, green, yellow, red at or above max",
                 "non_interior": NON_INTERIOR_COLOR,
             }
@@ -797,6 +842,18 @@ fn build(
         "scenes": [{"nodes": [0]}],
         "nodes": [{"mesh": 0, "name": "flatmesh"}],
         "meshes": [{"name": "flatmesh", "primitives": primitives}],
+        // Without a material, viewers use glTF's default: fully metallic and single-sided
+        // (nearly black in three.js, a garment's inside culled). Vertex colours (the heat
+        // map) multiply the white base colour.
+        "materials": [{
+            "name": "flatmesh",
+            "pbrMetallicRoughness": {
+                "baseColorFactor": if flattenability.is_some() { [1.0, 1.0, 1.0, 1.0] } else { [0.8, 0.8, 0.8, 1.0] },
+                "metallicFactor": 0.0,
+                "roughnessFactor": 0.8,
+            },
+            "doubleSided": true,
+        }],
         "accessors": accessors,
         "bufferViews": views,
         "buffers": [{"byteLength": bin.len()}],
@@ -817,7 +874,17 @@ pub fn write_glb_with(
     flattenability: Option<&[f64]>,
     scalars: &[VertexScalar<'_>],
 ) -> Vec<u8> {
-    let (root, bin) = build(mesh, flattenability, scalars);
+    write_glb_scaled(mesh, flattenability, scalars, HeatmapScale::Data)
+}
+
+/// [`write_glb_with`] with the heat map's range chosen by `scale`.
+pub fn write_glb_scaled(
+    mesh: &Mesh,
+    flattenability: Option<&[f64]>,
+    scalars: &[VertexScalar<'_>],
+    scale: HeatmapScale,
+) -> Vec<u8> {
+    let (root, bin) = build(mesh, flattenability, scalars, scale);
     let mut json = serde_json::to_vec(&root).unwrap_or_default();
     while json.len() % 4 != 0 {
         json.push(b' ');
@@ -848,7 +915,7 @@ pub fn write_gltf_with(
     flattenability: Option<&[f64]>,
     scalars: &[VertexScalar<'_>],
 ) -> Vec<u8> {
-    let (mut root, bin) = build(mesh, flattenability, scalars);
+    let (mut root, bin) = build(mesh, flattenability, scalars, HeatmapScale::Data);
     let uri = format!(
         "data:application/octet-stream;base64,{}",
         base64::engine::general_purpose::STANDARD.encode(&bin)
