@@ -92,10 +92,10 @@ pub struct Report {
     /// Interior vertices with ϖ ≤ tolerance.
     pub developable_vertices: usize,
     /// D[M], Eq. 2 of the wang-tang paper.
-    #[serde(rename = "D")]
+    #[serde(rename = "wang_tang_d")]
     pub d: f64,
     /// G[M], Eq. 4.
-    #[serde(rename = "G")]
+    #[serde(rename = "wang_tang_g")]
     pub g: f64,
     /// ϖ histogram over interior vertices.
     pub histogram: Vec<Bin>,

@@ -48,18 +48,41 @@ fn openapi_parameter_defaults_are_the_code_defaults() {
     use flatmesh::jobs::{JobSpec, Kind};
     let doc = openapi();
     let schemas = &doc["components"]["schemas"];
-    let per_kind = schemas["KindParams"]["allOf"].as_array().unwrap();
-    assert_eq!(
-        per_kind.len(),
-        Kind::ALL.len(),
-        "KindParams has one entry per kind"
-    );
+    // JobRequest and MultipartJobRequest: one schema per kind, chosen by `kind`.
+    for union in ["JobRequest", "MultipartJobRequest"] {
+        let mapping = schemas[union]["discriminator"]["mapping"]
+            .as_object()
+            .unwrap();
+        assert_eq!(
+            mapping.len(),
+            Kind::ALL.len(),
+            "{union}: one schema per kind"
+        );
+        assert_eq!(
+            schemas[union]["oneOf"].as_array().unwrap().len(),
+            Kind::ALL.len()
+        );
+        for (kind, target) in mapping {
+            let name = target
+                .as_str()
+                .unwrap()
+                .trim_start_matches("#/components/schemas/");
+            assert_eq!(
+                schemas[name]["properties"]["kind"]["enum"],
+                json!([kind]),
+                "{name}"
+            );
+            // Every example is valid against its own schema.
+            check(name, &schemas[name]["example"]);
+        }
+    }
+    let mapping = schemas["JobRequest"]["discriminator"]["mapping"].clone();
     for kind in Kind::ALL {
-        let entry = per_kind
-            .iter()
-            .find(|e| e["if"]["properties"]["kind"]["const"] == kind.name())
-            .unwrap_or_else(|| panic!("KindParams has no entry for `{}`", kind.name()));
-        let name = entry["then"]["properties"]["params"]["$ref"]
+        let request = mapping[kind.name()]
+            .as_str()
+            .unwrap_or_else(|| panic!("JobRequest has no schema for `{}`", kind.name()))
+            .trim_start_matches("#/components/schemas/");
+        let name = schemas[request]["properties"]["params"]["$ref"]
             .as_str()
             .unwrap()
             .trim_start_matches("#/components/schemas/");
@@ -1116,6 +1139,40 @@ async fn jobs_multipart_list_etag_delete() {
     )
     .await;
 
+    // Files typed as bytes for a client that asks for bytes; their own type otherwise.
+    for (accept, want) in [
+        ("application/octet-stream", "application/octet-stream"),
+        ("model/obj, application/octet-stream", "model/obj"),
+        ("*/*", "model/obj"),
+    ] {
+        let r = c
+            .get(s.url(&format!("/v1/jobs/{id}/mesh?format=obj")))
+            .header("accept", accept)
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.headers()["content-type"], want, "{accept}");
+    }
+    // A raw upload may name its format; an unknown one is refused.
+    let r = c
+        .post(s.url("/v1/meshes?format=obj"))
+        .header("content-type", "application/octet-stream")
+        .body(fixture("saddle"))
+        .send()
+        .await
+        .unwrap();
+    assert!([200, 201].contains(&r.status().as_u16()));
+    assert_eq!(json_of(r, "Mesh").await["format"], "obj");
+    let p = problem(
+        c.post(s.url("/v1/meshes?format=stl"))
+            .body(fixture("saddle"))
+            .send()
+            .await
+            .unwrap(),
+        422,
+    )
+    .await;
+    assert_eq!(p["field"], "format");
     // ETag / If-None-Match → 304 on every GET that has an ETag
     for path in [
         format!("/v1/jobs/{id}"),

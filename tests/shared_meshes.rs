@@ -182,7 +182,7 @@ fn every_shared_mesh_reports_or_is_refused_precisely() {
         );
         let reported = json["max_flattenability"].as_f64().unwrap();
         assert!((reported - max_varpi).abs() <= 1e-9, "{name}");
-        let d = json["D"].as_f64().unwrap();
+        let d = json["wang_tang_d"].as_f64().unwrap();
         assert!((0.0..=1.0).contains(&d), "{name}: D = {d}");
         checked += 1;
     }

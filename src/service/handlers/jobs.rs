@@ -547,6 +547,18 @@ pub async fn delete_job(State(st): State<AppState>, Path(id): Path<String>) -> A
     }
 }
 
+/// Whether `Accept` asks for `application/octet-stream` and not for `media` itself.
+fn accepts_only_octets(headers: &HeaderMap, media: &str) -> bool {
+    let Some(accept) = headers.get(header::ACCEPT).and_then(|v| v.to_str().ok()) else {
+        return false;
+    };
+    let types: Vec<&str> = accept
+        .split(',')
+        .map(|t| t.split(';').next().unwrap_or("").trim())
+        .collect();
+    types.contains(&"application/octet-stream") && !types.contains(&media)
+}
+
 /// A succeeded job's file, with a strong ETag (`If-None-Match` → 304 without reading it).
 async fn artifact(
     st: &AppState,
@@ -591,6 +603,13 @@ async fn artifact(
     })
     .await?;
     let disposition = format!("attachment; filename=\"{id}-{name}\"");
+    // A client that asks for bytes as such gets them typed so (generated clients parse by
+    // the first media type they know, and none knows model/gltf-binary or image/vnd.dxf).
+    let media = if accepts_only_octets(headers, media) {
+        "application/octet-stream"
+    } else {
+        media
+    };
     Ok((
         [
             (header::CONTENT_TYPE, media.to_string()),

@@ -14,12 +14,25 @@ use axum::http::{header, HeaderMap, StatusCode};
 use axum::response::IntoResponse;
 use std::collections::HashMap;
 
-/// `POST /v1/meshes`.
+/// `POST /v1/meshes` (`?format=obj|glb|gltf|off` names the format of a raw body, for
+/// clients that can only send `application/octet-stream`).
 pub async fn upload_mesh(
     State(st): State<AppState>,
+    Query(q): Query<HashMap<String, String>>,
     headers: HeaderMap,
     request: axum::extract::Request,
 ) -> ApiResult {
+    let named = q
+        .get("format")
+        .map(|f| {
+            io::Format::from_extension(f).ok_or_else(|| {
+                Problem::invalid(
+                    "format",
+                    format!("unknown mesh format `{f}` (obj, glb, gltf, off)"),
+                )
+            })
+        })
+        .transpose()?;
     let media = media_type(&headers).unwrap_or_default();
     let rec = if media == "multipart/form-data" {
         let mut mp = <Multipart as axum::extract::FromRequest<()>>::from_request(request, &())
@@ -43,11 +56,13 @@ pub async fn upload_mesh(
                     format!("the body exceeds {} bytes", st.max_upload),
                 )
             })?;
-        let format = format_of(&media, None, &bytes).ok_or_else(|| {
-            Problem::unsupported_media(format!(
-                "media type `{media}` is not a mesh format (expected {MESH_TYPES})"
-            ))
-        })?;
+        let format = named
+            .or_else(|| format_of(&media, None, &bytes))
+            .ok_or_else(|| {
+                Problem::unsupported_media(format!(
+                    "media type `{media}` is not a mesh format (expected {MESH_TYPES})"
+                ))
+            })?;
         store_mesh(&st, bytes, format, "body").await?
     };
     let (rec, created) = rec;
