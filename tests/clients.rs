@@ -1,14 +1,25 @@
-//! Clients generated from openapi.yaml work: a Python client (openapi-python-client) is
-//! generated afresh and runs an integrator's whole round trip against a real server
-//! (tests/clients/python_roundtrip.py). The generator lives in a virtual environment that
-//! `.ci/run` makes (`target/ci-venv`, or `FLATMESH_CLIENT_VENV`); without it the test says
-//! so and skips, except under `CI=true`, where that is a failure.
+//! Clients generated from openapi.yaml work: a Python client (openapi-python-client) and a
+//! TypeScript one (openapi-typescript types, type-checked by tsc, openapi-fetch at run time)
+//! are generated afresh and each runs an integrator's whole round trip against a real server
+//! (tests/clients/python_roundtrip.py, tests/clients/ts/roundtrip.ts). The generators are
+//! installed by `.ci/run` (a virtual environment `target/ci-venv`, or `FLATMESH_CLIENT_VENV`;
+//! `npm ci` in tests/clients/ts); without them a test says so and skips, except under
+//! `CI=true`, where that is a failure.
 
 mod common;
 
 use common::*;
 use std::path::{Path, PathBuf};
 use std::process::Command;
+
+/// Skip (saying why) or, under CI, fail.
+fn missing(what: &str) {
+    assert!(
+        std::env::var("CI").as_deref() != Ok("true"),
+        "CI=true but {what} (.ci/run installs it)"
+    );
+    eprintln!("SKIPPED: {what}; run .ci/run to install it");
+}
 
 /// The virtual environment with the generators, when there is one.
 fn venv() -> Option<PathBuf> {
@@ -18,16 +29,10 @@ fn venv() -> Option<PathBuf> {
     if dir.join("bin/openapi-python-client").is_file() {
         return Some(dir);
     }
-    assert!(
-        std::env::var("CI").as_deref() != Ok("true"),
-        "CI=true but no client generator in {} (.ci/run installs it)",
+    missing(&format!(
+        "no openapi-python-client in {} (or set FLATMESH_CLIENT_VENV)",
         dir.display()
-    );
-    eprintln!(
-        "SKIPPED: generated-client round trip (no openapi-python-client in {}; \
-         run .ci/run or set FLATMESH_CLIENT_VENV)",
-        dir.display()
-    );
+    ));
     None
 }
 
@@ -88,4 +93,48 @@ async fn generated_python_client_round_trip() {
     assert!(run.status.success(), "python round trip failed:\n{said}");
     assert!(said.contains("round trip: ok"), "{said}");
     let _ = std::fs::remove_dir_all(&out);
+}
+
+fn run_in(dir: &Path, program: &str, args: &[&str]) -> String {
+    let out = Command::new(program)
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .unwrap_or_else(|e| panic!("{program}: {e}"));
+    let said =
+        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{program} {args:?} failed:\n{said}");
+    said
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn generated_typescript_client_round_trip() {
+    let ts = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients/ts");
+    if !ts.join("node_modules/.bin/tsc").exists() {
+        missing("the TypeScript client tools (npm ci in tests/clients/ts)");
+        return;
+    }
+    let spec = Path::new(env!("CARGO_MANIFEST_DIR")).join("openapi.yaml");
+    run_in(
+        &ts,
+        "node",
+        &["generate.mjs", spec.to_str().unwrap(), "schema.d.ts"],
+    );
+    // The round trip must type-check against the generated types before it runs.
+    run_in(&ts, "node_modules/.bin/tsc", &["-p", "."]);
+    let s = Server::start(&tmp("tsclient-server"), &["--workers", "2"]);
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures");
+    let said = tokio::task::spawn_blocking({
+        let (ts, base) = (ts.clone(), s.base.clone());
+        move || {
+            run_in(
+                &ts,
+                "node",
+                &["out/roundtrip.js", &base, fixtures.to_str().unwrap()],
+            )
+        }
+    })
+    .await
+    .unwrap();
+    assert!(said.contains("round trip: ok"), "{said}");
 }
