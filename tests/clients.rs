@@ -138,3 +138,44 @@ async fn generated_typescript_client_round_trip() {
     .unwrap();
     assert!(said.contains("round trip: ok"), "{said}");
 }
+
+/// schemathesis with every check, bounded (10 examples per operation, deterministic): no
+/// server error, every response as documented, every documented request accepted.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn schemathesis_finds_nothing() {
+    let Some(venv) = venv() else {
+        return;
+    };
+    if !venv.join("bin/st").is_file() {
+        missing(&format!("no schemathesis in {}", venv.display()));
+        return;
+    }
+    let s = Server::start(&tmp("schemathesis"), &["--max-queued", "100000"]);
+    let said = tokio::task::spawn_blocking({
+        let (st, base) = (venv.join("bin/st"), s.base.clone());
+        move || {
+            run_in(
+                Path::new(env!("CARGO_MANIFEST_DIR")),
+                st.to_str().unwrap(),
+                &[
+                    "--config-file",
+                    "tests/clients/schemathesis.toml",
+                    "run",
+                    "openapi.yaml",
+                    "--url",
+                    &base,
+                    "--checks",
+                    "all",
+                    "--max-examples",
+                    "10",
+                    "--workers",
+                    "1",
+                    "--generation-deterministic",
+                ],
+            )
+        }
+    })
+    .await
+    .unwrap();
+    assert!(said.contains("passed"), "{said}");
+}

@@ -982,14 +982,17 @@ async fn subdivide_job_end_to_end() {
             );
         }
     }
-    problem(
-        c.get(s.url(&format!("/v1/jobs/{id}/mesh?level=2")))
-            .send()
-            .await
-            .unwrap(),
-        404,
-    )
-    .await;
+    // A level the job does not have, however large, is not found (not a malformed request).
+    for level in ["2", "248608681082215"] {
+        problem(
+            c.get(s.url(&format!("/v1/jobs/{id}/mesh?level={level}")))
+                .send()
+                .await
+                .unwrap(),
+            404,
+        )
+        .await;
+    }
     let p = problem(
         c.get(s.url(&format!("/v1/jobs/{id}/mesh?level=zero")))
             .send()

@@ -662,7 +662,8 @@ pub async fn job_mesh(
     // `?level=k`: level k's mesh of a `subdivide` job (404 when the job has no such level).
     let name = match q.get("level") {
         None => format!("mesh.{f}"),
-        Some(l) => match l.parse::<u32>() {
+        // Any level number is a valid request; one the job does not have is a 404.
+        Some(l) => match l.parse::<u64>() {
             Ok(k) if k >= 1 => format!("level_{k}.{f}"),
             _ => {
                 return Err(Problem::invalid(

@@ -56,12 +56,25 @@ pub async fn upload_mesh(
                     format!("the body exceeds {} bytes", st.max_upload),
                 )
             })?;
+        let sniffed = matches!(
+            media.as_str(),
+            "" | "application/octet-stream" | "text/plain"
+        );
         let format = named
             .or_else(|| format_of(&media, None, &bytes))
             .ok_or_else(|| {
-                Problem::unsupported_media(format!(
-                    "media type `{media}` is not a mesh format (expected {MESH_TYPES})"
-                ))
+                if sniffed {
+                    // The media type is fine; the content is not a format we know.
+                    Problem::invalid(
+                        "body",
+                        "the content is not a GLB, glTF, OBJ or OFF mesh (name the format \
+                         with ?format= if it is one)",
+                    )
+                } else {
+                    Problem::unsupported_media(format!(
+                        "media type `{media}` is not a mesh format (expected {MESH_TYPES})"
+                    ))
+                }
             })?;
         store_mesh(&st, bytes, format, "body").await?
     };

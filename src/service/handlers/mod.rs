@@ -141,10 +141,16 @@ async fn mesh_part(
         .unwrap_or_default();
     let filename = field.file_name().map(str::to_string);
     let bytes = field.bytes().await.map_err(multipart_err)?;
+    // The request's own media type was fine: a part that is no mesh is a bad member (422),
+    // not an unsupported request (415).
     let format = format_of(&media, filename.as_deref(), &bytes).ok_or_else(|| {
-        Problem::unsupported_media(format!(
-            "part `{name}`: media type `{media}` is not a mesh format (expected {MESH_TYPES})"
-        ))
+        Problem::invalid(
+            name,
+            format!(
+                "part `{name}`: neither its media type (`{media}`), its file name nor its \
+                 content says which mesh format it is (GLB, glTF, OBJ, OFF)"
+            ),
+        )
     })?;
     Ok((bytes, format))
 }
