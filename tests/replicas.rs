@@ -87,6 +87,20 @@ async fn one_replica_keeps_everything_in_the_database() {
         .await
         .unwrap();
     assert_eq!(r.status(), 200);
+    // Readiness is the database's: not ready while it is away (the process stays live),
+    // ready again once it is back.
+    assert_eq!(c.get(s.url("/readyz")).send().await.unwrap().status(), 200);
+    pg.stop();
+    let r = c.get(s.url("/readyz")).send().await.unwrap();
+    assert_eq!(r.status(), 503);
+    assert!(r.headers().contains_key("retry-after"));
+    assert_eq!(c.get(s.url("/healthz")).send().await.unwrap().status(), 200);
+    pg.start_again();
+    let t = Instant::now();
+    while c.get(s.url("/readyz")).send().await.unwrap().status() != 200 {
+        assert!(t.elapsed() < Duration::from_secs(20), "not ready again");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
 }
 
 /// A flatten that runs for about half a second and succeeds (LPFB stops at its iteration

@@ -221,6 +221,7 @@ async fn operational_endpoints() {
     json_of(r, "Ready").await;
     let v = json_of(c.get(s.url("/version")).send().await.unwrap(), "Version").await;
     assert_eq!(v["version"], env!("CARGO_PKG_VERSION"));
+    assert_eq!(v["kinds"], json!(flatmesh::jobs::Kind::names()));
     let text = c
         .get(s.url("/openapi.yaml"))
         .send()
@@ -1560,7 +1561,7 @@ async fn api_keys() {
         .header("access-control-request-method", "POST")
         .header(
             "access-control-request-headers",
-            "authorization,content-type,idempotency-key",
+            "authorization,content-type,idempotency-key,if-none-match,x-request-id",
         )
         .send()
         .await
@@ -1572,7 +1573,13 @@ async fn api_keys() {
         .to_str()
         .unwrap()
         .to_lowercase();
-    for name in ["authorization", "content-type", "idempotency-key"] {
+    for name in [
+        "authorization",
+        "content-type",
+        "idempotency-key",
+        "if-none-match",
+        "x-request-id",
+    ] {
         assert!(allowed.split(',').any(|a| a.trim() == name), "{allowed}");
     }
     assert!(h["access-control-allow-methods"]
@@ -1845,15 +1852,21 @@ async fn webhook_is_signed_and_delivered() {
     let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel::<(axum::http::HeaderMap, Vec<u8>)>();
     let hits = std::sync::Arc::new(std::sync::atomic::AtomicUsize::new(0));
     let h2 = hits.clone();
+    let first_id = std::sync::Arc::new(std::sync::Mutex::new(None::<String>));
+    let f2 = first_id.clone();
     let app = axum::Router::new().route(
         "/hook",
         axum::routing::post(
             move |headers: axum::http::HeaderMap, body: axum::body::Bytes| {
                 let tx = tx.clone();
-                let h2 = h2.clone();
+                let (h2, f2) = (h2.clone(), f2.clone());
                 async move {
                     // fail the first delivery: the server must retry
                     if h2.fetch_add(1, std::sync::atomic::Ordering::SeqCst) == 0 {
+                        *f2.lock().unwrap() = headers
+                            .get("webhook-id")
+                            .and_then(|v| v.to_str().ok())
+                            .map(String::from);
                         return axum::http::StatusCode::SERVICE_UNAVAILABLE;
                     }
                     let _ = tx.send((headers, body.to_vec()));
@@ -1894,6 +1907,12 @@ async fn webhook_is_signed_and_delivered() {
         "one retry"
     );
     let id = headers["webhook-id"].to_str().unwrap();
+    // The retry is the same message: a receiver can drop a duplicate by its id.
+    assert_eq!(
+        first_id.lock().unwrap().as_deref(),
+        Some(id),
+        "webhook-id across attempts"
+    );
     let ts = headers["webhook-timestamp"].to_str().unwrap();
     let now = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)

@@ -110,13 +110,7 @@ impl PgCluster {
             c.port = free_port();
             // FLATMESH_PG_OPTS: extra server options (say `-c log_min_duration_statement=5`
             // to see slow statements; the log is copied to FLATMESH_PG_LOG when set).
-            let opts = format!(
-                "-p {} -k {} -c listen_addresses=127.0.0.1 -c fsync=off \
-                 -c synchronous_commit=off -c full_page_writes=off -c max_connections=200 {}",
-                c.port,
-                c.dir.display(),
-                std::env::var("FLATMESH_PG_OPTS").unwrap_or_default()
-            );
+            let opts = c.server_opts();
             let log = c.dir.join("server.log");
             if c.try_run(
                 "pg_ctl",
@@ -137,6 +131,48 @@ impl PgCluster {
         panic!(
             "PostgreSQL did not start; its log: {}",
             std::fs::read_to_string(c.dir.join("server.log")).unwrap_or_default()
+        );
+    }
+
+    /// The server's options (port, socket directory, the speed settings of a throwaway).
+    fn server_opts(&self) -> String {
+        format!(
+            "-p {} -k {} -c listen_addresses=127.0.0.1 -c fsync=off \
+                 -c synchronous_commit=off -c full_page_writes=off -c max_connections=200 {}",
+            self.port,
+            self.dir.display(),
+            std::env::var("FLATMESH_PG_OPTS").unwrap_or_default()
+        )
+    }
+
+    /// Stop the server (its data stays): for tests of what happens while the database is away.
+    pub fn stop(&self) {
+        let data = self.dir.join("data");
+        self.run(
+            "pg_ctl",
+            &["-D", data.to_str().unwrap(), "-m", "fast", "-w", "stop"],
+        );
+    }
+
+    /// Start the server again after [`PgCluster::stop`], on the same port.
+    pub fn start_again(&self) {
+        let (data, log, opts) = (
+            self.dir.join("data"),
+            self.dir.join("server.log"),
+            self.server_opts(),
+        );
+        self.run(
+            "pg_ctl",
+            &[
+                "-D",
+                data.to_str().unwrap(),
+                "-o",
+                &opts,
+                "-l",
+                log.to_str().unwrap(),
+                "-w",
+                "start",
+            ],
         );
     }
 
