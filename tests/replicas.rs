@@ -319,3 +319,73 @@ async fn three_replicas_act_as_one_service() {
         assert_eq!(ended, 1, "{id} ended {ended} times");
     }
 }
+
+/// The bounded queue counts the store's queued jobs: with every worker of two replicas busy
+/// and one job queued through A, B refuses the next with 429 (`--max-queued 1`).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_queue_bound_holds_across_replicas() {
+    let Some(pg) = PgCluster::start("queue bound across replicas") else {
+        return;
+    };
+    let url = pg.database("bound");
+    let args = [
+        "--database-url",
+        &url,
+        "--workers",
+        "1",
+        "--max-queued",
+        "1",
+    ];
+    let (a, b) = (
+        Server::start(&tmp("bound-a"), &args),
+        Server::start(&tmp("bound-b"), &args),
+    );
+    let c = client();
+    let strip = upload(&c, &a, slow_obj()).await;
+    let slow: Value = serde_json::from_str(SLOW).unwrap();
+    let job = json!({"kind": "flatten", "mesh_id": strip["id"], "params": slow});
+    let mut ids = vec![];
+    for s in [&a, &b] {
+        ids.push(
+            submit(&c, s, job.clone()).await["id"]
+                .as_str()
+                .unwrap()
+                .to_string(),
+        );
+    }
+    // Both workers busy (one per replica), so the next job stays queued.
+    let t = Instant::now();
+    loop {
+        let mut running = 0;
+        for id in &ids {
+            running += (job_status(&c, &a, id).await == "running") as usize;
+        }
+        if running == 2 {
+            break;
+        }
+        assert!(
+            t.elapsed() < Duration::from_secs(30),
+            "both workers never busy"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    ids.push(
+        submit(&c, &a, job.clone()).await["id"]
+            .as_str()
+            .unwrap()
+            .to_string(),
+    );
+    let r = c.post(b.url("/v1/jobs")).json(&job).send().await.unwrap();
+    assert!(r.headers().contains_key("retry-after"));
+    problem(r, 429).await;
+    for id in &ids {
+        let _ = c.post(a.url(&format!("/v1/jobs/{id}/cancel"))).send().await;
+    }
+}
+
+async fn job_status(c: &reqwest::Client, s: &Server, id: &str) -> String {
+    job(c, s, id).await["status"]
+        .as_str()
+        .unwrap_or("")
+        .to_string()
+}

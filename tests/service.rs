@@ -1819,6 +1819,15 @@ async fn restart_loses_nothing() {
     assert_eq!(q["attempts"], 1);
     drop(s);
 
+    // The webhook secret generated on the first start is kept and reused, not replaced.
+    let secret = std::fs::read_to_string(dir.join("webhook_secret")).unwrap();
+    assert!(secret.trim().starts_with("whsec_"), "{secret}");
+    let s = Server::start(&dir, &["--workers", "1", "--lease", "1s"]);
+    assert_eq!(
+        std::fs::read_to_string(dir.join("webhook_secret")).unwrap(),
+        secret
+    );
+    drop(s);
     // A job interrupted as often as allowed fails instead of looping.
     let s = Server::start(&dir, &["--workers", "1", "--lease", "1s"]);
     let again = submit(
