@@ -110,21 +110,7 @@ impl PgCluster {
             c.port = free_port();
             // FLATMESH_PG_OPTS: extra server options (say `-c log_min_duration_statement=5`
             // to see slow statements; the log is copied to FLATMESH_PG_LOG when set).
-            let opts = c.server_opts();
-            let log = c.dir.join("server.log");
-            if c.try_run(
-                "pg_ctl",
-                &[
-                    "-D",
-                    data.to_str().unwrap(),
-                    "-o",
-                    &opts,
-                    "-l",
-                    log.to_str().unwrap(),
-                    "-w",
-                    "start",
-                ],
-            ) {
+            if c.try_start() {
                 return Some(c);
             }
         }
@@ -154,14 +140,14 @@ impl PgCluster {
         );
     }
 
-    /// Start the server again after [`PgCluster::stop`], on the same port.
-    pub fn start_again(&self) {
+    /// `pg_ctl start` on this cluster's port and directory; whether it started.
+    fn try_start(&self) -> bool {
         let (data, log, opts) = (
             self.dir.join("data"),
             self.dir.join("server.log"),
             self.server_opts(),
         );
-        self.run(
+        self.try_run(
             "pg_ctl",
             &[
                 "-D",
@@ -173,7 +159,12 @@ impl PgCluster {
                 "-w",
                 "start",
             ],
-        );
+        )
+    }
+
+    /// Start the server again after [`PgCluster::stop`], on the same port.
+    pub fn start_again(&self) {
+        assert!(self.try_start(), "PostgreSQL did not start again");
     }
 
     fn command(&self, tool: &str, args: &[&str]) -> Command {
