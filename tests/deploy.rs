@@ -3,8 +3,10 @@
 //! them, probes on the service's real health routes, and every FLATMESH_* variable a real
 //! flag of `flatmesh serve`.
 
+mod common;
+
 use serde_yaml::Value;
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 
 fn yaml(path: &str) -> Vec<Value> {
     let text = std::fs::read_to_string(path).unwrap();
@@ -140,4 +142,145 @@ fn kubernetes_example_probes_the_real_routes_and_reads_the_database_secret() {
         "unknown: {:?}",
         names.difference(&known)
     );
+}
+
+/// The Dockerfile's instructions, continuation lines joined: (instruction, arguments).
+fn dockerfile() -> Vec<(String, String)> {
+    let text = std::fs::read_to_string("Dockerfile").unwrap();
+    let joined = text.replace("\\\n", " ");
+    joined
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty() && !l.starts_with('#'))
+        .map(|l| {
+            let (i, a) = l.split_once(' ').unwrap_or((l, ""));
+            (i.to_string(), a.trim().to_string())
+        })
+        .collect()
+}
+
+/// A JSON-array (exec form) argument list.
+fn exec_form(args: &str) -> Vec<String> {
+    serde_json::from_str(args).unwrap_or_else(|e| panic!("{args}: {e}"))
+}
+
+/// The image runs `flatmesh serve` as a non-root user on the `/data` volume, bound to the
+/// port it exposes, and its healthcheck passes against that server and fails without it:
+/// checked by running the image's command with the image's environment (on a free port and a
+/// temporary data directory; no container engine runs here). The build stage's stub benches
+/// are exactly Cargo.toml's, so the dependency layer builds.
+#[test]
+fn dockerfile_runs_the_service_as_documented() {
+    use std::io::BufRead;
+    let all = dockerfile();
+    let last_from = all.iter().rposition(|(i, _)| i == "FROM").unwrap();
+    let (build, image) = all.split_at(last_from);
+    let get = |name: &str| -> Vec<String> {
+        image
+            .iter()
+            .filter(|(i, _)| i == name)
+            .map(|(_, a)| a.clone())
+            .collect()
+    };
+    let user = get("USER");
+    assert_eq!(user.len(), 1);
+    assert!(!["root", "0"].contains(&user[0].as_str()), "{user:?}");
+    let runs = get("RUN").join(" ");
+    assert!(
+        runs.contains("useradd") && runs.contains(&user[0]),
+        "{runs}"
+    );
+    let env: BTreeMap<String, String> = get("ENV")
+        .iter()
+        .flat_map(|a| a.split_whitespace().map(str::to_string).collect::<Vec<_>>())
+        .map(|kv| {
+            let (k, v) = kv.split_once('=').unwrap();
+            (k.to_string(), v.to_string())
+        })
+        .collect();
+    let known = serve_env();
+    for k in env.keys() {
+        assert!(known.contains(k), "ENV {k} is no flag of flatmesh serve");
+    }
+    let data = &env["FLATMESH_DATA_DIR"];
+    assert_eq!(get("VOLUME"), std::slice::from_ref(data));
+    assert!(
+        runs.contains(&format!("chown {} {data}", user[0])),
+        "{runs}"
+    );
+    let port = env["FLATMESH_BIND"].rsplit(':').next().unwrap().to_string();
+    assert_eq!(get("EXPOSE"), std::slice::from_ref(&port));
+    let health = get("HEALTHCHECK");
+    let health = exec_form(health[0].split_once("CMD ").unwrap().1);
+    let si = health.iter().position(|a| a == "--server").unwrap() + 1;
+    assert_eq!(health[si].rsplit(':').next().unwrap(), port, "{health:?}");
+    let argv: Vec<String> = [exec_form(&get("ENTRYPOINT")[0]), exec_form(&get("CMD")[0])].concat();
+    assert_eq!(argv[0], "flatmesh");
+    assert_eq!(health[0], "flatmesh");
+
+    // The image's command with its environment, on a free port of the same interface.
+    let dir = common::tmp("docker-image");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_flatmesh"))
+        .args(&argv[1..])
+        .envs(&env)
+        .env("FLATMESH_BIND", env["FLATMESH_BIND"].replace(&port, "0"))
+        .env("FLATMESH_DATA_DIR", &dir)
+        .env_remove("FLATMESH_API_KEYS")
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    std::io::BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let actual = line.trim().rsplit(':').next().unwrap().to_string();
+    assert!(actual.parse::<u16>().is_ok(), "{line}");
+    let healthcheck = |url: &str| {
+        let mut args = health[1..].to_vec();
+        args[si - 1] = url.to_string();
+        std::process::Command::new(env!("CARGO_BIN_EXE_flatmesh"))
+            .args(&args)
+            .status()
+            .unwrap()
+            .success()
+    };
+    let url = health[si].replace(&format!(":{port}"), &format!(":{actual}"));
+    assert!(healthcheck(&url), "healthcheck against {url}");
+    assert!(dir.join("flatmesh.sqlite3").exists(), "no store in {dir:?}");
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert!(!healthcheck(&url), "healthcheck passes with no server");
+
+    // The build stage's awk lists Cargo.toml's [[bench]] names, one stub each.
+    let build_runs: String = build
+        .iter()
+        .filter(|(i, _)| i == "RUN")
+        .map(|(_, a)| a.as_str())
+        .collect();
+    let program = build_runs.split("awk '").nth(1).unwrap();
+    let program = program.split("' Cargo.toml").next().unwrap();
+    let out = std::process::Command::new("awk")
+        .args([program, "Cargo.toml"])
+        .output()
+        .unwrap();
+    let listed: BTreeSet<String> = String::from_utf8(out.stdout)
+        .unwrap()
+        .split_whitespace()
+        .map(str::to_string)
+        .collect();
+    let cargo = std::fs::read_to_string("Cargo.toml").unwrap();
+    let benches: BTreeSet<String> = cargo
+        .split("[[bench]]")
+        .skip(1)
+        .map(|b| {
+            let line = b
+                .lines()
+                .find(|l| l.trim_start().starts_with("name"))
+                .unwrap();
+            line.split('"').nth(1).unwrap().to_string()
+        })
+        .collect();
+    assert!(!benches.is_empty());
+    assert_eq!(listed, benches);
 }

@@ -21,6 +21,11 @@ pub struct Server {
 
 impl Server {
     pub fn start(dir: &Path, args: &[&str]) -> Server {
+        Server::start_with_env(dir, args, &[])
+    }
+    /// [`Server::start`] with these environment variables set; without them the keys and
+    /// CORS origins of the caller's shell are cleared, so that it cannot change a test.
+    pub fn start_with_env(dir: &Path, args: &[&str], env: &[(&str, &str)]) -> Server {
         std::fs::create_dir_all(dir).unwrap();
         let log = std::fs::OpenOptions::new()
             .create(true)
@@ -33,6 +38,8 @@ impl Server {
             .arg(dir)
             .args(args)
             .env_remove("FLATMESH_API_KEYS")
+            .env_remove("FLATMESH_CORS_ORIGINS")
+            .envs(env.iter().copied())
             .stdout(Stdio::piped())
             .stderr(Stdio::from(log))
             .spawn()

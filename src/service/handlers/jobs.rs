@@ -575,10 +575,21 @@ async fn artifact(
         )));
     }
     if !j.artifacts.iter().any(|a| a == name) {
+        // Patterns a mesh-changing job could not derive: say why (the job's warning).
+        let why = j
+            .outcome
+            .as_ref()
+            .and_then(|o| o["warnings"].as_array())
+            .into_iter()
+            .flatten()
+            .find(|w| name.starts_with("patterns.") && w["code"] == "patterns_unavailable")
+            .and_then(|w| w["message"].as_str())
+            .map(|m| format!(": {m}"))
+            .unwrap_or_default();
         return Err(Problem::new(
             StatusCode::NOT_FOUND,
             "not-found",
-            format!("job `{id}` ({}) produced no {name}", j.kind),
+            format!("job `{id}` ({}) produced no {name}{why}", j.kind),
         ));
     }
     // A succeeded job's files never change: its id and the file name identify the bytes.
