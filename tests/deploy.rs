@@ -202,6 +202,9 @@ fn dockerfile_runs_the_service_as_documented() {
     for k in env.keys() {
         assert!(known.contains(k), "ENV {k} is no flag of flatmesh serve");
     }
+    // What the README tells users to run: `-p 8080:8080 -v flatmesh-data:/data`.
+    assert_eq!(env["FLATMESH_DATA_DIR"], "/data");
+    assert_eq!(env["FLATMESH_BIND"], "0.0.0.0:8080");
     let data = &env["FLATMESH_DATA_DIR"];
     assert_eq!(get("VOLUME"), std::slice::from_ref(data));
     assert!(
@@ -248,6 +251,11 @@ fn dockerfile_runs_the_service_as_documented() {
     let url = health[si].replace(&format!(":{port}"), &format!(":{actual}"));
     assert!(healthcheck(&url), "healthcheck against {url}");
     assert!(dir.join("flatmesh.sqlite3").exists(), "no store in {dir:?}");
+    // The README's "SQLite index (WAL)": the write-ahead log sits beside it while it runs.
+    assert!(
+        dir.join("flatmesh.sqlite3-wal").exists(),
+        "no WAL in {dir:?}"
+    );
     child.kill().unwrap();
     child.wait().unwrap();
     assert!(!healthcheck(&url), "healthcheck passes with no server");

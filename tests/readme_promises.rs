@@ -9,6 +9,7 @@ mod common;
 use common::*;
 use serde_json::{json, Value};
 use std::collections::{BTreeMap, BTreeSet};
+use std::path::Path;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
@@ -396,6 +397,7 @@ async fn callback_targets() {
         "http://[::ffff:127.0.0.1]/hook",
         "http://[fd00::1]/hook",
         "http://api.localhost/hook",
+        "http://LocalHost./hook",
     ];
     for s in [&strict, &open] {
         let m = upload(&c, s, fixture("cone")).await;
@@ -469,10 +471,16 @@ async fn keys_and_any_origin_from_the_environment() {
 }
 
 fn flatmesh_client(base: &str, args: &[&str], env: &[(&str, &str)]) -> (bool, String) {
+    run_client(&[&["--server", base][..], args].concat(), env)
+}
+
+/// `flatmesh client ARGS` with only these of its variables set: success, stdout + stderr.
+fn run_client(args: &[&str], env: &[(&str, &str)]) -> (bool, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_flatmesh"))
-        .args(["client", "--server", base])
+        .arg("client")
         .args(args)
         .env_remove("FLATMESH_API_KEY")
+        .env_remove("FLATMESH_SERVER")
         .envs(env.iter().copied())
         .output()
         .unwrap();
@@ -537,4 +545,191 @@ async fn request_timeout() {
     );
     let r = client().get(s.url("/healthz")).send().await.unwrap();
     assert_eq!(r.status(), 200);
+}
+
+/// `flatmesh client submit` takes each input as an id or a file, in every combination (a
+/// perturb job with its reference body), finds the server through `FLATMESH_SERVER`, and
+/// `wait --timeout` gives up on a job that runs longer.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn client_inputs_as_ids_or_files() {
+    let s = Server::start(&tmp("promise-client-inputs"), &["--workers", "1"]);
+    let c = client();
+    let dir = tmp("promise-client-inputs-files");
+    std::fs::create_dir_all(&dir).unwrap();
+    let (cyl, _) = flatmesh::io::load(&fixture("cylinder"), flatmesh::io::Format::Obj).unwrap();
+    let mut body = String::new();
+    for p in cyl.positions() {
+        body += &format!("v {} {} {}\n", 0.9 * p[0], 0.9 * p[1], p[2]);
+    }
+    for t in cyl.triangles() {
+        body += &format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1);
+    }
+    let body_file = dir.join("body.obj");
+    std::fs::write(&body_file, body).unwrap();
+    let body_file = body_file.to_str().unwrap();
+    let garment = "fixtures/cylinder_noisy.obj";
+    let server = [("FLATMESH_SERVER", s.base.as_str())];
+    let id_of = |out: &str| -> String {
+        let v: Value = serde_json::from_str(out).unwrap_or_else(|e| panic!("{e}: {out}"));
+        v["id"].as_str().unwrap().to_string()
+    };
+    let (ok, out) = run_client(&["upload", garment], &server);
+    assert!(ok, "{out}");
+    let garment_id = id_of(&out);
+    let (ok, out) = run_client(&["upload", body_file], &server);
+    assert!(ok, "{out}");
+    let body_id = id_of(&out);
+    let combos: [[&str; 4]; 4] = [
+        ["--mesh", garment, "--reference", body_file],
+        ["--mesh", garment, "--reference-mesh-id", &body_id],
+        ["--mesh-id", &garment_id, "--reference", body_file],
+        ["--mesh-id", &garment_id, "--reference-mesh-id", &body_id],
+    ];
+    for combo in combos {
+        let args = [&["submit", "perturb"][..], &combo].concat();
+        let (ok, out) = run_client(&args, &server);
+        assert!(ok, "{combo:?}: {out}");
+        let id = id_of(&out);
+        let j = job(&c, &s, &id).await;
+        // Same bytes, same stored mesh (uploads are deduplicated by content).
+        assert_eq!(j["mesh_id"], garment_id.as_str(), "{combo:?}: {j}");
+        assert_eq!(j["reference_mesh_id"], body_id.as_str(), "{combo:?}: {j}");
+        let (ok, out) = run_client(&["wait", &id, "--timeout", "120"], &server);
+        assert!(ok, "{combo:?}: {out}");
+    }
+    // No input at all, and a body given to a kind that uses none: refused, saying why.
+    let (ok, out) = run_client(&["submit", "perturb"], &server);
+    assert!(!ok && out.contains("--mesh-id or --mesh"), "{out}");
+    let (ok, out) = run_client(
+        &[
+            "submit",
+            "flatten",
+            "--mesh",
+            garment,
+            "--reference",
+            body_file,
+        ],
+        &server,
+    );
+    assert!(!ok && out.contains("reference"), "{out}");
+    let slow = dir.join("slow.obj");
+    std::fs::write(&slow, slow_obj()).unwrap();
+    let (ok, out) = run_client(
+        &[
+            "submit",
+            "flatten",
+            "--mesh",
+            slow.to_str().unwrap(),
+            "--set",
+            &format!("max_iterations={}", 100_000),
+            "--set",
+            "tolerance=1e-300",
+        ],
+        &server,
+    );
+    assert!(ok, "{out}");
+    let id = id_of(&out);
+    let t0 = Instant::now();
+    let (ok, out) = run_client(&["wait", &id, "--timeout", "1"], &server);
+    assert!(!ok, "{out}");
+    assert!(t0.elapsed() < Duration::from_secs(30), "{out}");
+    let r = c
+        .post(s.url(&format!("/v1/jobs/{id}/cancel")))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202, "a cancel of a running job is accepted");
+}
+
+/// The load benchmark reads exactly the environment variables the README lists for it.
+#[test]
+fn load_benchmark_variables_are_documented() {
+    let bench = std::fs::read_to_string("benches/service_load.rs").unwrap();
+    // `env("X", default)` and `std::env::var("X")`; not `.env("X", …)`, which sets the
+    // server's.
+    let mut read = BTreeSet::new();
+    let parts: Vec<&str> = bench.split("env(\"").collect();
+    for w in parts.windows(2) {
+        let name = w[1].split('"').next().unwrap();
+        if !w[0].ends_with('.') && name.chars().all(|c| c.is_ascii_uppercase() || c == '_') {
+            read.insert(name.to_string());
+        }
+    }
+    for s in bench.split("std::env::var(\"").skip(1) {
+        read.insert(s.split('"').next().unwrap().to_string());
+    }
+    let readme = std::fs::read_to_string("README.md").unwrap();
+    let start = readme.find("`cargo bench --bench service_load`").unwrap();
+    let para = &readme[start..];
+    let para = &para[..para.find("\n\n").unwrap()];
+    let listed: BTreeSet<String> = para
+        .split('`')
+        .skip(1)
+        .step_by(2)
+        .map(|w| w.split('=').next().unwrap().to_string())
+        .filter(|w| w.chars().all(|c| c.is_ascii_uppercase() || c == '_'))
+        .collect();
+    assert!(read.len() >= 5, "{read:?}");
+    assert_eq!(read, listed);
+}
+
+/// The job threads run at `--worker-nice` (Linux: read from /proc while a job runs), and a
+/// value outside 0–19 is refused at start-up.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn worker_threads_run_at_the_nice_value() {
+    let out = Command::new(env!("CARGO_BIN_EXE_flatmesh"))
+        .args(["serve", "--worker-nice", "20"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    if !Path::new("/proc/self/task").exists() {
+        eprintln!("SKIPPED: no /proc here");
+        return;
+    }
+    let s = Server::start(
+        &tmp("promise-nice"),
+        &["--workers", "1", "--worker-nice", "7"],
+    );
+    let c = client();
+    let m = upload(&c, &s, slow_obj()).await;
+    let params: Value = serde_json::from_str(SLOW).unwrap();
+    let j = submit(
+        &c,
+        &s,
+        json!({"kind": "flatten", "mesh_id": m["id"], "params": params}),
+    )
+    .await;
+    let id = j["id"].as_str().unwrap();
+    let running = wait_for(&c, &s, id, &["running"]).await;
+    assert_eq!(running["status"], "running");
+    let mut nice = BTreeMap::new();
+    for task in std::fs::read_dir(format!("/proc/{}/task", s.pid())).unwrap() {
+        let task = task.unwrap().path();
+        let comm = std::fs::read_to_string(task.join("comm")).unwrap_or_default();
+        let stat = std::fs::read_to_string(task.join("stat")).unwrap_or_default();
+        // Fields after the command's closing parenthesis: state is field 3, nice field 19.
+        let Some(rest) = stat.rsplit_once(") ").map(|x| x.1) else {
+            continue;
+        };
+        let n: i32 = rest.split_whitespace().nth(16).unwrap().parse().unwrap();
+        nice.insert(comm.trim().to_string(), n);
+    }
+    // Relative to the nice value this test runs at (the server inherits it; an unprivileged
+    // process cannot go below it).
+    let own = std::fs::read_to_string("/proc/self/stat").unwrap();
+    let own: i32 = own
+        .rsplit_once(") ")
+        .unwrap()
+        .1
+        .split_whitespace()
+        .nth(16)
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert_eq!(nice.get("flatmesh-worker"), Some(&own.max(7)), "{nice:?}");
+    assert_eq!(nice.get("flatmesh-http"), Some(&own), "{nice:?}");
+    c.post(s.url(&format!("/v1/jobs/{id}/cancel")))
+        .send()
+        .await
+        .unwrap();
 }

@@ -6,7 +6,7 @@ mod common;
 use base64::Engine;
 use common::*;
 use serde_json::{json, Value};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
@@ -368,6 +368,7 @@ async fn meshes_upload_report_delete() {
     problem(r, 413).await;
     problem(c.get(s.url("/v1/meshes/m_nope")).send().await.unwrap(), 404).await;
     // The same bytes again: the same mesh, 200 instead of 201, nothing stored twice.
+    let files = files_under(&s.dir);
     let again = c
         .post(s.url("/v1/meshes"))
         .header("content-type", "model/obj")
@@ -378,6 +379,7 @@ async fn meshes_upload_report_delete() {
     assert_eq!(again.status(), 200);
     assert_eq!(again.headers()["location"], loc.as_str());
     assert_eq!(json_of(again, "Mesh").await["id"], id);
+    assert_eq!(files_under(&s.dir), files, "a re-upload stored something");
     // Listing: newest first, in pages.
     let other = upload(&c, &s, fixture("cylinder")).await;
     let page = json_of(
@@ -953,6 +955,9 @@ async fn subdivide_job_end_to_end() {
     let done = wait_for(&c, &s, id, &["succeeded", "failed"]).await;
     assert_eq!(done["status"], "succeeded", "{done}");
     let result = job_result(&c, &s, id).await;
+    // Whether every level reached its tolerance, at the job's top level.
+    assert!(done["converged"].is_boolean(), "{done}");
+    assert_eq!(done["converged"], result["job"]["converged"], "{done}");
     assert_eq!(
         result["job"]["levels"].as_array().unwrap().len(),
         1,
@@ -1500,14 +1505,43 @@ async fn problem_types_are_absolute_and_documented() {
         problem(r, 404).await["type"],
         "https://fm.example.com/api/problems/not-found"
     );
-    let m = upload(&c, &s, fixture("cylinder")).await;
-    assert_eq!(
-        m["links"]["self"],
-        format!(
-            "https://fm.example.com/api/v1/meshes/{}",
-            m["id"].as_str().unwrap()
-        )
+    let r = c
+        .post(s.url("/v1/meshes"))
+        .header("content-type", "model/obj")
+        .header("host", "internal:8080")
+        .body(fixture("cylinder"))
+        .send()
+        .await
+        .unwrap();
+    let location = r.headers()["location"].to_str().unwrap().to_string();
+    let m = json_of(r, "Mesh").await;
+    let expected = format!(
+        "https://fm.example.com/api/v1/meshes/{}",
+        m["id"].as_str().unwrap()
     );
+    assert_eq!(m["links"]["self"], expected.as_str());
+    assert_eq!(location, expected);
+}
+
+/// Every file under `dir` (path, size), except the SQLite files, whose pages change on reads.
+fn files_under(dir: &Path) -> Vec<(PathBuf, u64)> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let e = e.unwrap();
+            let p = e.path();
+            if p.is_dir() {
+                stack.push(p);
+            } else if !p.to_string_lossy().contains("flatmesh.sqlite3")
+                && !p.ends_with("server.log")
+            {
+                out.push((p, e.metadata().unwrap().len()));
+            }
+        }
+    }
+    out.sort();
+    out
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -1630,6 +1664,22 @@ async fn cancel_full_queue_time_limit() {
     let ready = json_of(r, "Ready").await;
     assert_eq!(ready["queue_full"], true, "{ready}");
     assert_eq!(ready["queued"], ready["max_queued"], "{ready}");
+    // ... and in metrics: the queue at its limit, the refusal counted.
+    let m = c
+        .get(s.url("/metrics"))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    for line in [
+        "flatmesh_jobs_queued 1",
+        "flatmesh_jobs_queue_limit 1",
+        "flatmesh_jobs_rejected_total{reason=\"queue_full\"} 1",
+    ] {
+        assert!(m.lines().any(|l| l == line), "{line} not in {m}");
+    }
     // a mesh in use cannot go; results of an unfinished job are a conflict
     problem(
         c.delete(s.url(&format!("/v1/meshes/{sid}")))

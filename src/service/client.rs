@@ -1,7 +1,7 @@
 //! `flatmesh client`: talk to a running server (upload, submit, wait, download, health).
 
 use serde_json::Value;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 /// Connection options and the command.
@@ -33,12 +33,16 @@ pub enum ClientCommand {
         /// Id of an uploaded mesh.
         #[arg(long, conflicts_with = "mesh")]
         mesh_id: Option<String>,
-        /// A mesh file, uploaded with the job (multipart).
+        /// A mesh file, uploaded with the job (one multipart request when the reference, if
+        /// any, is a file too; else uploaded first).
         #[arg(long)]
         mesh: Option<PathBuf>,
         /// Id of an uploaded reference mesh.
-        #[arg(long)]
+        #[arg(long, conflicts_with = "reference")]
         reference_mesh_id: Option<String>,
+        /// A reference mesh file, uploaded with the job.
+        #[arg(long)]
+        reference: Option<PathBuf>,
         /// A parameter, KEY=VALUE (VALUE read as JSON when it parses).
         #[arg(long = "set", value_name = "KEY=VALUE")]
         set: Vec<String>,
@@ -102,6 +106,41 @@ fn mesh_media(path: &std::path::Path) -> &'static str {
 }
 
 /// Read a response: JSON on success, the problem's detail as the error otherwise.
+/// `POST /v1/meshes` with the file's bytes; the stored mesh's JSON.
+async fn upload(http: &reqwest::Client, base: &str, file: &Path) -> Result<Value, String> {
+    let bytes = std::fs::read(file).map_err(|x| format!("{}: {x}", file.display()))?;
+    let r = http
+        .post(format!("{base}/v1/meshes"))
+        .header("content-type", mesh_media(file))
+        .body(bytes)
+        .send()
+        .await
+        .map_err(|e| e.to_string())?;
+    json_or_problem(r).await
+}
+
+/// The id of the mesh stored from `file`.
+async fn uploaded_id(http: &reqwest::Client, base: &str, file: &Path) -> Result<String, String> {
+    let m = upload(http, base, file).await?;
+    m["id"]
+        .as_str()
+        .map(str::to_string)
+        .ok_or_else(|| format!("{}: the upload answered no mesh id", file.display()))
+}
+
+/// A multipart part holding the file, named and typed by its extension.
+fn file_part(path: &Path) -> Result<reqwest::multipart::Part, String> {
+    let bytes = std::fs::read(path).map_err(|x| format!("{}: {x}", path.display()))?;
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "mesh".into());
+    reqwest::multipart::Part::bytes(bytes)
+        .file_name(name)
+        .mime_str(mesh_media(path))
+        .map_err(|e| e.to_string())
+}
+
 async fn json_or_problem(res: reqwest::Response) -> Result<Value, String> {
     let status = res.status();
     let body = res.bytes().await.map_err(|e| e.to_string())?;
@@ -162,15 +201,7 @@ async fn run_async(args: ClientArgs) -> Result<(), String> {
             }
         }
         ClientCommand::Upload { file } => {
-            let bytes = std::fs::read(&file).map_err(|x| format!("{}: {x}", file.display()))?;
-            let r = http
-                .post(format!("{base}/v1/meshes"))
-                .header("content-type", mesh_media(&file))
-                .body(bytes)
-                .send()
-                .await
-                .map_err(e)?;
-            println!("{}", json_or_problem(r).await?);
+            println!("{}", upload(&http, &base, &file).await?);
             Ok(())
         }
         ClientCommand::Submit {
@@ -178,6 +209,7 @@ async fn run_async(args: ClientArgs) -> Result<(), String> {
             mesh_id,
             mesh,
             reference_mesh_id,
+            reference,
             set,
             callback_url,
             idempotency_key,
@@ -187,28 +219,33 @@ async fn run_async(args: ClientArgs) -> Result<(), String> {
             if let Some(k) = idempotency_key {
                 req = req.header("idempotency-key", k);
             }
-            let req = if let Some(path) = mesh {
+            // The multipart job part names no mesh ids: with an id for one input and a file
+            // for the other, the file is uploaded first and the job sent as JSON.
+            let req = if let (Some(path), None) = (&mesh, &reference_mesh_id) {
                 let job = serde_json::json!({"kind": kind, "params": params, "callback_url": callback_url});
-                let bytes = std::fs::read(&path).map_err(|x| format!("{}: {x}", path.display()))?;
-                let name = path
-                    .file_name()
-                    .map(|n| n.to_string_lossy().into_owned())
-                    .unwrap_or_else(|| "mesh".into());
-                let part = reqwest::multipart::Part::bytes(bytes)
-                    .file_name(name)
-                    .mime_str(mesh_media(&path))
-                    .map_err(e)?;
-                let form = reqwest::multipart::Form::new()
+                let mut form = reqwest::multipart::Form::new()
                     .part(
                         "job",
                         reqwest::multipart::Part::text(job.to_string())
                             .mime_str("application/json")
                             .map_err(e)?,
                     )
-                    .part("mesh", part);
+                    .part("mesh", file_part(path)?);
+                if let Some(r) = &reference {
+                    form = form.part("reference", file_part(r)?);
+                }
                 req.multipart(form)
             } else {
-                let mesh_id = mesh_id.ok_or("give --mesh-id or --mesh")?;
+                let mesh_id = match (mesh_id, &mesh) {
+                    (Some(id), _) => id,
+                    (None, Some(path)) => uploaded_id(&http, &base, path).await?,
+                    (None, None) => return Err("give --mesh-id or --mesh".into()),
+                };
+                let reference_mesh_id = match (reference_mesh_id, &reference) {
+                    (Some(id), _) => Some(id),
+                    (None, Some(path)) => Some(uploaded_id(&http, &base, path).await?),
+                    (None, None) => None,
+                };
                 req.json(&serde_json::json!({
                     "kind": kind, "mesh_id": mesh_id, "reference_mesh_id": reference_mesh_id,
                     "params": params, "callback_url": callback_url,

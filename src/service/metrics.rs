@@ -11,6 +11,8 @@ pub struct Metrics {
     submitted: AtomicU64,
     finished: [AtomicU64; 5],
     queued: AtomicU64,
+    queue_limit: AtomicU64,
+    rejected_full: AtomicU64,
     running: AtomicU64,
     job_micros: AtomicU64,
     uploads: AtomicU64,
@@ -49,6 +51,14 @@ impl Metrics {
     /// Queue length now.
     pub fn set_queued(&self, n: usize) {
         self.queued.store(n as u64, Ordering::Relaxed);
+    }
+    /// The bound of the queue (`--max-queued`).
+    pub fn set_queue_limit(&self, n: usize) {
+        self.queue_limit.store(n as u64, Ordering::Relaxed);
+    }
+    /// A submit refused because the queue was full (429).
+    pub fn rejected_full(&self) {
+        self.rejected_full.fetch_add(1, Ordering::Relaxed);
     }
     /// Jobs on workers now.
     pub fn set_running(&self, n: usize) {
@@ -95,6 +105,14 @@ impl Metrics {
         }
         s += "# HELP flatmesh_jobs_queued Jobs waiting for a worker.\n# TYPE flatmesh_jobs_queued gauge\n";
         let _ = writeln!(s, "flatmesh_jobs_queued {}", g(&self.queued));
+        s += "# HELP flatmesh_jobs_queue_limit Most jobs the queue holds (--max-queued); submits beyond it get 429.\n# TYPE flatmesh_jobs_queue_limit gauge\n";
+        let _ = writeln!(s, "flatmesh_jobs_queue_limit {}", g(&self.queue_limit));
+        s += "# HELP flatmesh_jobs_rejected_total Submits refused with 429 because the queue was full.\n# TYPE flatmesh_jobs_rejected_total counter\n";
+        let _ = writeln!(
+            s,
+            "flatmesh_jobs_rejected_total{{reason=\"queue_full\"}} {}",
+            g(&self.rejected_full)
+        );
         s += "# HELP flatmesh_jobs_running Jobs on a worker.\n# TYPE flatmesh_jobs_running gauge\n";
         let _ = writeln!(s, "flatmesh_jobs_running {}", g(&self.running));
         s += "# HELP flatmesh_job_run_seconds_total Worker time spent on jobs.\n# TYPE flatmesh_job_run_seconds_total counter\n";

@@ -138,7 +138,9 @@ pub fn check_url(url: &str, allow_private: bool) -> Result<reqwest::Url, String>
             url::Host::Ipv4(a) => Some(IpAddr::V4(a)),
             url::Host::Ipv6(a) => Some(IpAddr::V6(a)),
             url::Host::Domain(d) => {
-                if d.eq_ignore_ascii_case("localhost") || d.ends_with(".localhost") {
+                // `localhost.` is `localhost` (a fully qualified name).
+                let d = d.trim_end_matches('.').to_ascii_lowercase();
+                if d == "localhost" || d.ends_with(".localhost") {
                     return Err("loopback host refused".into());
                 }
                 None

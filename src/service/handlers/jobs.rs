@@ -113,6 +113,7 @@ fn validate_submit(st: &AppState, s: &Submit, has_reference: Option<bool>) -> Re
 }
 
 fn queue_full(st: &AppState) -> Problem {
+    st.metrics.rejected_full();
     Problem::new(
         StatusCode::TOO_MANY_REQUESTS,
         "queue-full",

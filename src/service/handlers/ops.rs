@@ -55,6 +55,7 @@ pub async fn metrics(State(st): State<AppState>) -> Response {
     if let Ok(n) = blocking(move || Ok(store.count_with_status(Status::Queued)?)).await {
         st.metrics.set_queued(n);
     }
+    st.metrics.set_queue_limit(st.exec.limits.max_queued);
     (
         [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
         st.metrics.render(),
