@@ -325,7 +325,7 @@ async fn patterns_of_kinds_that_change_the_mesh() {
     assert_eq!(r.status(), 200);
 }
 
-/// A job lists its input mesh's warnings among its own; `?format=off` reads an OFF body
+/// A job lists its input mesh's warnings and its patterns' problems among its own; `?format=off` reads an OFF body
 /// sent as bytes, and a body that is not what `?format=` names is a 422.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn input_warnings_and_named_formats() {
@@ -346,7 +346,48 @@ async fn input_warnings_and_named_formats() {
         "{done}"
     );
 
+    // A piece that cannot be flattened (a torus beside a cone): the pattern's problem is
+    // among the job's warnings.
     let (cone, _) = flatmesh::io::load(&fixture("cone"), flatmesh::io::Format::Obj).unwrap();
+    let mut two = String::new();
+    for p in cone.positions() {
+        two += &format!("v {} {} {}\n", p[0], p[1], p[2]);
+    }
+    for t in cone.triangles() {
+        two += &format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1);
+    }
+    let n = cone.num_vertices();
+    for line in String::from_utf8(torus_obj()).unwrap().lines() {
+        match line.split_once(' ') {
+            Some(("v", xyz)) => {
+                let c: Vec<f64> = xyz.split(' ').map(|x| x.parse().unwrap()).collect();
+                two += &format!("v {} {} {}\n", c[0] + 10.0, c[1], c[2]);
+            }
+            Some(("f", ids)) => {
+                let ids: Vec<String> = ids
+                    .split(' ')
+                    .map(|i| (i.parse::<usize>().unwrap() + n).to_string())
+                    .collect();
+                two += &format!("f {}\n", ids.join(" "));
+            }
+            _ => {}
+        }
+    }
+    let m = upload(&c, &s, two.into_bytes()).await;
+    let j = submit(&c, &s, json!({"kind": "flatten", "mesh_id": m["id"]})).await;
+    let done = wait_for(&c, &s, j["id"].as_str().unwrap(), &["succeeded", "failed"]).await;
+    assert_eq!(done["status"], "succeeded", "{done}");
+    let pattern = done["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|w| w["code"] == "pattern")
+        .unwrap_or_else(|| panic!("no pattern warning: {done}"));
+    assert!(
+        pattern["message"].as_str().unwrap().contains("genus 1"),
+        "{pattern}"
+    );
+
     let mut off = format!("OFF\n{} {} 0\n", cone.num_vertices(), cone.num_faces());
     for p in cone.positions() {
         off += &format!("{} {} {}\n", p[0], p[1], p[2]);

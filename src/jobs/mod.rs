@@ -388,6 +388,16 @@ impl Figures {
         }
     }
 
+    /// Problems of the patterns a kind made itself (pieces skipped, or outside the bounds);
+    /// derived patterns keep theirs in [`JobOutcome::pattern_warnings`].
+    pub fn pattern_warnings(&self) -> &[String] {
+        match self {
+            Figures::Flatten(s) => &s.job_warnings,
+            Figures::Segment(s) => &s.flatten.job_warnings,
+            _ => &[],
+        }
+    }
+
     /// Interior vertices an optimiser left above its tolerance.
     pub fn stuck_vertices(&self) -> &[u32] {
         match self {

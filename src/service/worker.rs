@@ -661,7 +661,12 @@ fn job_warnings(
     if let Some(why) = &outcome.patterns_unavailable {
         out.push(serde_json::json!({"code": "patterns_unavailable", "message": why}));
     }
-    for w in &outcome.pattern_warnings {
+    for w in outcome
+        .figures
+        .pattern_warnings()
+        .iter()
+        .chain(&outcome.pattern_warnings)
+    {
         out.push(serde_json::json!({"code": "pattern", "message": w}));
     }
     for w in input {
