@@ -74,6 +74,15 @@ async fn open_store(cfg: &Config) -> Result<Arc<dyn Store>, String> {
 }
 
 async fn serve_async(cfg: Config) -> Result<(), String> {
+    // An empty key would otherwise be dropped and, if it was the only one, turn
+    // authentication off without a word.
+    if cfg.api_keys.iter().any(|k| k.trim().is_empty()) {
+        return Err(
+            "--api-key / FLATMESH_API_KEYS: an empty key (give non-empty keys, \
+                    comma-separated, or none to run without authentication)"
+                .into(),
+        );
+    }
     std::fs::create_dir_all(&cfg.data_dir)
         .map_err(|e| format!("cannot create {}: {e}", cfg.data_dir.display()))?;
     let store = open_store(&cfg).await?;
@@ -126,13 +135,7 @@ async fn serve_async(cfg: Config) -> Result<(), String> {
         webhooks,
         max_upload: cfg.max_upload,
         public_url: cfg.public_url.as_deref().map(Arc::from),
-        api_keys: Arc::new(
-            cfg.api_keys
-                .iter()
-                .filter(|k| !k.is_empty())
-                .cloned()
-                .collect(),
-        ),
+        api_keys: Arc::new(cfg.api_keys.clone()),
     };
     // Expired results go at a quarter of the retention, at most once a minute.
     let sweeper = exec.clone();

@@ -2,9 +2,10 @@
 //! `webhook-timestamp`, `webhook-signature: v1,<base64 HMAC-SHA256(secret, "{id}.{ts}.{body}")>`,
 //! where the secret is `whsec_<base64 key>`. Sent from the store's outbox (a job's end queues
 //! its delivery in the same atomic step), with retries and exponential backoff;
-//! only http(s) targets, and private, loopback and link-local addresses are refused unless the
-//! configuration allows them (checked on submit for literal addresses and again on delivery
-//! after DNS resolution).
+//! only http(s) targets, and only globally routable unicast addresses unless the configuration
+//! allows private ones: a literal address is checked on submit and on delivery, a name by the
+//! client's own resolver, which hands the connector only the addresses it checked (so a name
+//! cannot be re-pointed between the check and the connection).
 
 use super::domain::now_ms;
 use super::metrics::Metrics;
@@ -13,7 +14,7 @@ use super::views::{job_json, rfc3339};
 use base64::Engine;
 use hmac::{Hmac, Mac};
 use sha2::Sha256;
-use std::net::IpAddr;
+use std::net::{IpAddr, Ipv4Addr, Ipv6Addr, SocketAddr};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -97,30 +98,105 @@ pub fn sign(key: &[u8], id: &str, timestamp: i64, body: &[u8]) -> String {
     )
 }
 
-/// Whether an address must not be called (loopback, private, link-local, unspecified, …).
+/// Whether an address must not be called: anything but a globally routable unicast address
+/// (an allow-list, so that ranges nobody thought of are refused too).
 pub fn is_private(ip: IpAddr) -> bool {
     match ip {
-        IpAddr::V4(v) => {
-            v.is_private()
-                || v.is_loopback()
-                || v.is_link_local()
-                || v.is_unspecified()
-                || v.is_broadcast()
-                || v.is_documentation()
-                || v.octets()[0] == 0
-                || (v.octets()[0] == 100 && (v.octets()[1] & 0xc0) == 64) // 100.64/10 CGNAT
-        }
-        IpAddr::V6(v) => {
-            if let Some(v4) = v.to_ipv4_mapped() {
-                return is_private(IpAddr::V4(v4));
-            }
-            let s = v.segments()[0];
-            v.is_loopback()
-                || v.is_unspecified()
-                || (s & 0xfe00) == 0xfc00 // unique local
-                || (s & 0xffc0) == 0xfe80 // link-local
-        }
+        IpAddr::V4(v) => !is_global_v4(v),
+        IpAddr::V6(v) => match v.to_ipv4_mapped() {
+            Some(v4) => !is_global_v4(v4),
+            None => !is_global_v6(v),
+        },
     }
+}
+
+/// IPv4 outside every special-purpose block of the IANA registry (RFC 6890 and successors)
+/// that is not globally reachable, and outside multicast and the reserved 240/4.
+fn is_global_v4(v: Ipv4Addr) -> bool {
+    let [a, b, c, _] = v.octets();
+    let refused = a == 0 // "this network"
+        || a == 10
+        || (a == 100 && (b & 0xc0) == 64) // 100.64/10, shared (CGNAT)
+        || a == 127
+        || (a == 169 && b == 254) // link-local (cloud metadata)
+        || (a == 172 && (b & 0xf0) == 16)
+        || (a == 192 && b == 0 && c == 0) // 192.0.0/24, protocol assignments
+        || (a == 192 && b == 0 && c == 2) // documentation
+        || (a == 192 && b == 88 && c == 99) // 6to4 relay anycast
+        || (a == 192 && b == 168)
+        || (a == 198 && (b & 0xfe) == 18) // 198.18/15, benchmarking
+        || (a == 198 && b == 51 && c == 100) // documentation
+        || (a == 203 && b == 0 && c == 113) // documentation
+        || a >= 224; // multicast 224/4, reserved 240/4, broadcast
+    !refused
+}
+
+/// IPv6 global unicast (2000::/3) outside the blocks inside it that are not globally
+/// reachable or that embed an IPv4 address the check would not see (6to4, Teredo).
+fn is_global_v6(v: Ipv6Addr) -> bool {
+    let s = v.segments();
+    let refused = (s[0] & 0xe000) != 0x2000 // not 2000::/3: loopback, ULA, link-local,
+        // site-local, multicast, IPv4-compatible ::a.b.c.d, NAT64 64:ff9b::/96, …
+        || (s[0] == 0x2001 && s[1] < 0x0200) // 2001::/23, IETF protocol assignments (Teredo, ORCHID, …)
+        || (s[0] == 0x2001 && s[1] == 0x0db8) // documentation
+        || s[0] == 0x2002 // 6to4
+        || (s[0] & 0xfff0) == 0x3ff0; // 3fff::/20, documentation
+    !refused
+}
+
+/// A name that resolves only to refused addresses.
+#[derive(Debug)]
+struct PrivateTarget(String);
+
+impl std::fmt::Display for PrivateTarget {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} resolves only to private or reserved addresses",
+            self.0
+        )
+    }
+}
+
+impl std::error::Error for PrivateTarget {}
+
+/// The webhook client's resolver: the addresses of a name that may be called, and only
+/// those, are what the connector gets.
+struct CheckedResolver {
+    allow_private: bool,
+}
+
+impl reqwest::dns::Resolve for CheckedResolver {
+    fn resolve(&self, name: reqwest::dns::Name) -> reqwest::dns::Resolving {
+        let allow_private = self.allow_private;
+        Box::pin(async move {
+            let host = name.as_str().to_string();
+            let found: Vec<SocketAddr> =
+                tokio::net::lookup_host((host.as_str(), 0)).await?.collect();
+            let usable: Vec<SocketAddr> = found
+                .into_iter()
+                .filter(|a| allow_private || !is_private(a.ip()))
+                .collect();
+            if usable.is_empty() {
+                return Err(
+                    Box::new(PrivateTarget(host)) as Box<dyn std::error::Error + Send + Sync>
+                );
+            }
+            Ok(Box::new(usable.into_iter()) as reqwest::dns::Addrs)
+        })
+    }
+}
+
+/// Whether a failed request was refused by [`CheckedResolver`] (not worth retrying).
+fn refused_target(e: &reqwest::Error) -> Option<String> {
+    let mut cause: Option<&(dyn std::error::Error + 'static)> = Some(e);
+    while let Some(c) = cause {
+        if let Some(p) = c.downcast_ref::<PrivateTarget>() {
+            return Some(p.to_string());
+        }
+        cause = c.source();
+    }
+    None
 }
 
 /// Check a callback URL at submit time; the message names what is wrong.
@@ -162,6 +238,7 @@ impl Webhooks {
         metrics: Arc<Metrics>,
     ) -> Webhooks {
         let client = reqwest::Client::builder()
+            .dns_resolver(Arc::new(CheckedResolver { allow_private }))
             .timeout(Duration::from_secs(10))
             .redirect(reqwest::redirect::Policy::none())
             .user_agent(concat!("flatmesh/", env!("CARGO_PKG_VERSION")))
@@ -310,20 +387,8 @@ async fn deliver(
     body: &[u8],
     allow_private: bool,
 ) -> Result<(), (String, bool)> {
+    // Literal addresses are checked here, names by the client's resolver.
     let u = check_url(url, allow_private).map_err(|e| (e, false))?;
-    if !allow_private {
-        // Resolve now and refuse names that point inside (DNS can change after submit).
-        let host = u.host_str().unwrap_or_default().to_string();
-        let port = u.port_or_known_default().unwrap_or(80);
-        let addrs = tokio::net::lookup_host((host.as_str(), port))
-            .await
-            .map_err(|e| (format!("cannot resolve {host}: {e}"), true))?;
-        for a in addrs {
-            if is_private(a.ip()) {
-                return Err((format!("{host} resolves to a private address"), false));
-            }
-        }
-    }
     let ts = now_ms() / 1000;
     let res = client
         .post(u)
@@ -334,12 +399,102 @@ async fn deliver(
         .body(body.to_vec())
         .send()
         .await
-        .map_err(|e| (e.to_string(), true))?;
+        .map_err(|e| match refused_target(&e) {
+            Some(why) => (why, false),
+            None => (e.to_string(), true),
+        })?;
     let s = res.status();
     if s.is_success() {
         Ok(())
     } else {
         // 410 Gone: the receiver does not want it any more.
         Err((format!("status {s}"), s.as_u16() != 410))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Only globally routable unicast addresses may be called: every special-purpose block
+    /// the issue found missing, and the usual ones, in each form.
+    #[test]
+    fn only_global_unicast_addresses_are_callable() {
+        let refused = [
+            "0.1.2.3",
+            "10.0.0.1",
+            "100.64.0.1",
+            "127.0.0.1",
+            "169.254.169.254",
+            "172.16.0.1",
+            "172.31.255.255",
+            "192.0.0.8",
+            "192.0.2.1",
+            "192.88.99.1",
+            "192.168.1.1",
+            "198.18.0.1",
+            "198.19.255.255",
+            "198.51.100.1",
+            "203.0.113.1",
+            "224.0.0.1",
+            "239.1.1.1",
+            "240.0.0.1",
+            "255.255.255.255",
+            "::",
+            "::1",
+            "::127.0.0.1",
+            "::ffff:10.0.0.1",
+            "::ffff:127.0.0.1",
+            "64:ff9b::7f00:1",
+            "100::1",
+            "fc00::1",
+            "fd12::1",
+            "fe80::1",
+            "fec0::1",
+            "ff02::1",
+            "2001::1",
+            "2001:db8::1",
+            "2002:7f00:1::1",
+            "3fff::1",
+        ];
+        let allowed = [
+            "8.8.8.8",
+            "1.1.1.1",
+            "100.128.0.1",
+            "172.32.0.1",
+            "192.0.1.1",
+            "198.20.0.1",
+            "223.255.255.254",
+            "::ffff:8.8.8.8",
+            "2606:4700:4700::1111",
+            "2a00:1450:4001::1",
+        ];
+        for a in refused {
+            assert!(is_private(a.parse().unwrap()), "{a} is callable");
+        }
+        for a in allowed {
+            assert!(!is_private(a.parse().unwrap()), "{a} is refused");
+        }
+    }
+
+    /// The resolver hands over only the addresses that may be called, and refuses a name with
+    /// none (as an error the delivery does not retry).
+    #[tokio::test]
+    async fn resolver_hands_over_only_callable_addresses() {
+        use reqwest::dns::Resolve;
+        let name = || "localhost".parse::<reqwest::dns::Name>().unwrap();
+        let strict = CheckedResolver {
+            allow_private: false,
+        };
+        let err = match strict.resolve(name()).await {
+            Ok(addrs) => panic!("localhost resolved to {:?}", addrs.collect::<Vec<_>>()),
+            Err(e) => e,
+        };
+        assert!(err.downcast_ref::<PrivateTarget>().is_some(), "{err}");
+        let open = CheckedResolver {
+            allow_private: true,
+        };
+        let addrs: Vec<SocketAddr> = open.resolve(name()).await.unwrap().collect();
+        assert!(!addrs.is_empty() && addrs.iter().all(|a| a.ip().is_loopback()));
     }
 }
