@@ -145,8 +145,14 @@ fn off_reader() {
     assert_eq!(m.num_vertices(), 5);
     let e = io::load(b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n", Format::Off).unwrap_err();
     assert!(e.to_string().contains("OFF line 6"), "{e}");
-    // A forged count allocates nothing and fails where the file ends.
+    // A forged count allocates nothing: past the limit it is refused at the header, under it
+    // the file fails where it ends.
     let e = io::load(b"OFF\n4000000000 1 0\n0 0 0\n", Format::Off).unwrap_err();
+    assert!(
+        e.to_string().contains("announces 4000000000 vertices"),
+        "{e}"
+    );
+    let e = io::load(b"OFF\n1000000 1 0\n0 0 0\n", Format::Off).unwrap_err();
     assert!(e.to_string().contains("ended early"), "{e}");
     let e = io::load(b"OFF\n3 1 0\n0 0 0\n1 0 0\n", Format::Off).unwrap_err();
     assert!(e.to_string().contains("ended early"), "{e}");

@@ -53,14 +53,75 @@ fn err(msg: impl Into<String>) -> ReadError {
 
 /// Parse `.gltf` (embedded buffers) or `.glb` bytes.
 pub fn read(bytes: &[u8]) -> Result<(RawMesh, Vec<Warning>), ReadError> {
+    read_limited(bytes, &super::Limits::default())
+}
+
+/// [`read`] within `limits`: what the scene expands to (instances × primitives) is counted
+/// from the accessors before any of it is read.
+pub fn read_limited(
+    bytes: &[u8],
+    limits: &super::Limits,
+) -> Result<(RawMesh, Vec<Warning>), ReadError> {
     let parsed = std::panic::catch_unwind(|| gltf::Gltf::from_slice(bytes));
     let doc = match parsed {
         Ok(Ok(doc)) => doc,
         Ok(Err(e)) => return Err(err(describe_gltf_error(&e))),
         Err(_) => return Err(err("malformed document (the glTF parser rejected it)")),
     };
-    let buffers = resolve_buffers(&doc)?;
-    assemble(&doc, &buffers)
+    let decoded = resolve_buffers(&doc)?;
+    let blob = doc.blob.as_deref().unwrap_or_default();
+    // Buffers without a uri all view the one binary chunk: borrowed, never copied.
+    let buffers: Vec<&[u8]> = decoded
+        .iter()
+        .map(|d| d.as_deref().unwrap_or(blob))
+        .collect();
+    check_expansion(&doc, &buffers, limits)?;
+    assemble(&doc, &buffers, limits)
+}
+
+/// Refuse a scene that expands past `limits`, counting from accessor counts alone (each
+/// checked against its buffer first, so that a forged count is named as such): every
+/// instance of a mesh and every primitive sharing an accessor counts again.
+fn check_expansion(
+    doc: &gltf::Gltf,
+    buffers: &[&[u8]],
+    limits: &super::Limits,
+) -> Result<(), ReadError> {
+    let instances = scene_instances(doc)?;
+    let (mut triangles, mut vertices) = (0usize, 0usize);
+    let mut spaces: std::collections::HashSet<(usize, usize)> = Default::default();
+    for inst in &instances {
+        for prim in inst.mesh.primitives() {
+            if prim.mode() != gltf::mesh::Mode::Triangles {
+                continue;
+            }
+            let Some(pos) = prim.get(&gltf::Semantic::Positions) else {
+                continue;
+            };
+            span(&pos, buffers, pos.size(), 1)?;
+            if let Some(i) = prim.indices() {
+                span(&i, buffers, i.size(), 1)?;
+            }
+            let corners = prim.indices().map_or(pos.count(), |i| i.count());
+            triangles = triangles.saturating_add(corners / 3);
+            // Indexed primitives of one node share their POSITION accessor's vertices.
+            if prim.indices().is_none() || spaces.insert((inst.node, pos.index())) {
+                vertices = vertices.saturating_add(pos.count());
+            }
+        }
+    }
+    for (n, what) in [(triangles, "triangles"), (vertices, "vertices")] {
+        if n > limits.max_triangles {
+            return Err(ReadError::TooLarge {
+                what: format!(
+                    "the scene expands to {n} {what} ({} mesh instances)",
+                    instances.len()
+                ),
+                limit: limits.max_triangles,
+            });
+        }
+    }
+    Ok(())
 }
 
 fn describe_gltf_error(e: &gltf::Error) -> String {
@@ -82,25 +143,30 @@ fn describe_gltf_error(e: &gltf::Error) -> String {
     }
 }
 
-/// Buffer data by index: the GLB binary chunk or a decoded `data:` URI.
-fn resolve_buffers(doc: &gltf::Gltf) -> Result<Vec<Vec<u8>>, ReadError> {
+/// Buffer data by index: a decoded `data:` URI, or `None` for the GLB binary chunk (which
+/// every uri-less buffer views, so it is not copied per buffer).
+fn resolve_buffers(doc: &gltf::Gltf) -> Result<Vec<Option<Vec<u8>>>, ReadError> {
     let mut out = Vec::new();
     for buffer in doc.buffers() {
         let i = buffer.index();
-        let data = match buffer.source() {
-            gltf::buffer::Source::Bin => doc
-                .blob
-                .clone()
-                .ok_or_else(|| err(format!("buffers[{i}]: no uri and no GLB binary chunk")))?,
+        let (data, len) = match buffer.source() {
+            gltf::buffer::Source::Bin => {
+                let blob = doc
+                    .blob
+                    .as_deref()
+                    .ok_or_else(|| err(format!("buffers[{i}]: no uri and no GLB binary chunk")))?;
+                (None, blob.len())
+            }
             gltf::buffer::Source::Uri(uri) => {
-                decode_data_uri(uri).map_err(|m| err(format!("buffers[{i}]: {m}")))?
+                let d = decode_data_uri(uri).map_err(|m| err(format!("buffers[{i}]: {m}")))?;
+                let n = d.len();
+                (Some(d), n)
             }
         };
-        if data.len() < buffer.length() {
+        if len < buffer.length() {
             return Err(err(format!(
-                "buffers[{i}]: byteLength is {} but only {} bytes of data are present",
+                "buffers[{i}]: byteLength is {} but only {len} bytes of data are present",
                 buffer.length(),
-                data.len()
             )));
         }
         out.push(data);
@@ -134,7 +200,7 @@ struct Span<'a> {
 /// its bytes, or say precisely what does not fit.
 fn span<'a>(
     accessor: &gltf::Accessor,
-    buffers: &'a [Vec<u8>],
+    buffers: &[&'a [u8]],
     component_size: usize,
     components: usize,
 ) -> Result<Span<'a>, ReadError> {
@@ -154,7 +220,7 @@ fn span<'a>(
             "accessors[{a}]: byteStride {stride} is smaller than the element size {elem}"
         )));
     }
-    let buffer = &buffers[view.buffer().index()];
+    let buffer: &'a [u8] = buffers[view.buffer().index()];
     let v = view.index();
     let view_end = view
         .offset()
@@ -195,7 +261,7 @@ fn span<'a>(
 
 fn read_positions(
     accessor: &gltf::Accessor,
-    buffers: &[Vec<u8>],
+    buffers: &[&[u8]],
 ) -> Result<Vec<[f32; 3]>, ReadError> {
     use gltf::accessor::{DataType, Dimensions};
     let a = accessor.index();
@@ -223,7 +289,7 @@ fn read_positions(
     Ok(out)
 }
 
-fn read_indices(accessor: &gltf::Accessor, buffers: &[Vec<u8>]) -> Result<Vec<u32>, ReadError> {
+fn read_indices(accessor: &gltf::Accessor, buffers: &[&[u8]]) -> Result<Vec<u32>, ReadError> {
     use gltf::accessor::{DataType, Dimensions};
     let a = accessor.index();
     let size = match accessor.data_type() {
@@ -361,8 +427,13 @@ fn patch_name(mesh: &gltf::Mesh, prim: &gltf::Primitive) -> String {
     }
 }
 
-fn assemble(doc: &gltf::Gltf, buffers: &[Vec<u8>]) -> Result<(RawMesh, Vec<Warning>), ReadError> {
+fn assemble(
+    doc: &gltf::Gltf,
+    buffers: &[&[u8]],
+    limits: &super::Limits,
+) -> Result<(RawMesh, Vec<Warning>), ReadError> {
     let mut warnings = Vec::new();
+    let mut names_cut = 0usize;
     let mut positions: Vec<[f64; 3]> = Vec::new();
     let mut space_of_vertex: Vec<u32> = Vec::new();
     let mut triangles: Vec<[u32; 3]> = Vec::new();
@@ -438,15 +509,19 @@ fn assemble(doc: &gltf::Gltf, buffers: &[Vec<u8>]) -> Result<(RawMesh, Vec<Warni
                     corners.len()
                 )));
             }
-            if triangles.len() + corners.len() / 3 > MAX_TRIANGLES {
-                return Err(err(format!(
-                    "more than {MAX_TRIANGLES} triangles after instancing; refused"
-                )));
+            if triangles.len() + corners.len() / 3 > limits.max_triangles {
+                return Err(ReadError::TooLarge {
+                    what: format!("triangles up to {where_}"),
+                    limit: limits.max_triangles,
+                });
             }
             if corners.is_empty() {
                 continue;
             }
-            let mut name = patch_name(&inst.mesh, &prim);
+            let full = patch_name(&inst.mesh, &prim);
+            let (kept, cut) = super::cap_name(&full);
+            names_cut += usize::from(cut);
+            let mut name = kept.to_string();
             let count = name_count.entry(name.clone()).or_insert(0);
             *count += 1;
             if *count > 1 {
@@ -472,6 +547,15 @@ fn assemble(doc: &gltf::Gltf, buffers: &[Vec<u8>]) -> Result<(RawMesh, Vec<Warni
     }
     if triangles.is_empty() {
         return Err(err("the default scene has no triangle primitive"));
+    }
+    if names_cut > 0 {
+        warnings.push(Warning::new(
+            "names_shortened",
+            format!(
+                "{names_cut} patch names were longer than {} bytes and were cut",
+                super::MAX_NAME_BYTES
+            ),
+        ));
     }
     let (positions, triangles) = weld_spaces(positions, &space_of_vertex, triangles, &mut warnings);
     Ok((

@@ -12,6 +12,39 @@ pub mod pattern;
 use crate::mesh::{Mesh, MeshError, RawMesh, Warning};
 use std::path::Path;
 
+/// What one file may expand to, checked before the memory is allocated: a small glTF can
+/// instance one mesh thousands of times, an OBJ polygon line fans into many triangles.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Limits {
+    /// Most triangles (after instancing and triangulation) and most vertices.
+    pub max_triangles: usize,
+}
+
+impl Default for Limits {
+    /// The command line's: files are the user's own; the bound only keeps a corrupt count
+    /// from exhausting memory.
+    fn default() -> Self {
+        Limits {
+            max_triangles: gltf::MAX_TRIANGLES,
+        }
+    }
+}
+
+/// Names (patches, objects, groups) longer than this many bytes are cut, with a warning.
+pub const MAX_NAME_BYTES: usize = 256;
+
+/// `name` cut to at most [`MAX_NAME_BYTES`] bytes, on a character boundary.
+pub fn cap_name(name: &str) -> (&str, bool) {
+    if name.len() <= MAX_NAME_BYTES {
+        return (name, false);
+    }
+    let mut end = MAX_NAME_BYTES;
+    while !name.is_char_boundary(end) {
+        end -= 1;
+    }
+    (&name[..end], true)
+}
+
 /// A mesh file format.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Format {
@@ -104,20 +137,46 @@ pub enum ReadError {
     /// The file could not be read.
     #[error("{0}")]
     Io(String),
+    /// The file expands to more than the limit allows.
+    #[error("{what}: more than the {limit} allowed")]
+    TooLarge {
+        /// What was counted, and where (e.g. `triangles after instancing 400 nodes`).
+        what: String,
+        /// The limit passed.
+        limit: usize,
+    },
 }
 
 /// Parse bytes of a known format into raw mesh data.
 pub fn read(bytes: &[u8], format: Format) -> Result<(RawMesh, Vec<Warning>), ReadError> {
+    read_limited(bytes, format, &Limits::default())
+}
+
+/// [`read`] within `limits`.
+pub fn read_limited(
+    bytes: &[u8],
+    format: Format,
+    limits: &Limits,
+) -> Result<(RawMesh, Vec<Warning>), ReadError> {
     match format {
-        Format::Obj => obj::read(bytes),
-        Format::Off => off::read(bytes),
-        Format::Gltf | Format::Glb => gltf::read(bytes),
+        Format::Obj => obj::read_limited(bytes, limits),
+        Format::Off => off::read_limited(bytes, limits),
+        Format::Gltf | Format::Glb => gltf::read_limited(bytes, limits),
     }
 }
 
 /// Parse and validate: the one entry point from bytes to a [`Mesh`].
 pub fn load(bytes: &[u8], format: Format) -> Result<(Mesh, Vec<Warning>), ReadError> {
-    let (raw, mut warnings) = read(bytes, format)?;
+    load_limited(bytes, format, &Limits::default())
+}
+
+/// [`load`] within `limits`.
+pub fn load_limited(
+    bytes: &[u8],
+    format: Format,
+    limits: &Limits,
+) -> Result<(Mesh, Vec<Warning>), ReadError> {
+    let (raw, mut warnings) = read_limited(bytes, format, limits)?;
     let (mesh, w) = Mesh::new(raw)?;
     warnings.extend(w);
     Ok((mesh, warnings))

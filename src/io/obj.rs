@@ -20,6 +20,10 @@ use std::fmt::Write;
 /// meshes but outlines, and would let one line of input stall the reader.
 pub const MAX_POLYGON: usize = 1024;
 
+/// Distinct unknown keywords counted one by one; statements of any further ones are counted
+/// together.
+const MAX_IGNORED_KINDS: usize = 64;
+
 fn syntax(line: usize, message: impl Into<String>) -> ReadError {
     ReadError::Syntax {
         format: "OBJ",
@@ -60,6 +64,16 @@ fn resolve(tok: &str, count: usize, line: usize, what: &str) -> Result<u32, Read
 
 /// Parse OBJ bytes.
 pub fn read(bytes: &[u8]) -> Result<(RawMesh, Vec<Warning>), ReadError> {
+    read_limited(bytes, &super::Limits::default())
+}
+
+/// [`read`] within `limits`: triangles are counted as polygons are triangulated, names cut
+/// to [`super::MAX_NAME_BYTES`], ignored statements counted in a hash map (a file of many
+/// distinct unknown keywords stays linear) and listed in the warning only up to ten.
+pub fn read_limited(
+    bytes: &[u8],
+    limits: &super::Limits,
+) -> Result<(RawMesh, Vec<Warning>), ReadError> {
     let mut raw = RawMesh::default();
     let mut uvs: Vec<[f64; 2]> = Vec::new();
     let mut uv_tris: Vec<[u32; 3]> = Vec::new();
@@ -69,14 +83,20 @@ pub fn read(bytes: &[u8]) -> Result<(RawMesh, Vec<Warning>), ReadError> {
     let mut group = String::new();
     let mut patch_ids: HashMap<(String, String), u32> = HashMap::new();
     let mut current: Option<u32> = None;
-    let mut ignored: Vec<(String, usize)> = Vec::new();
+    // Statements skipped, by keyword (the first MAX_IGNORED_KINDS keywords, in file order).
+    let mut ignored: HashMap<String, usize> = HashMap::new();
+    let mut ignored_order: Vec<String> = Vec::new();
+    let mut ignored_other = 0usize;
+    let mut names_cut = 0usize;
     let mut poly: Vec<(u32, Option<u32>)> = Vec::new();
     let mut tri_buf: Vec<[usize; 3]> = Vec::new();
     let mut scratch = EarScratch::default();
 
     let mut line_no = 0usize;
     let mut pending = String::new();
-    for raw_line in bytes.split(|&b| b == b'\n') {
+    // One empty line after the last, so that a file ending in a continuation (`\\` and no
+    // newline) still ends its statement.
+    for raw_line in bytes.split(|&b| b == b'\n').chain(std::iter::once(&[][..])) {
         line_no += 1;
         let text = String::from_utf8_lossy(raw_line);
         let mut text: &str = text.trim_end_matches('\r');
@@ -183,6 +203,12 @@ pub fn read(bytes: &[u8]) -> Result<(RawMesh, Vec<Warning>), ReadError> {
                         poly.iter().map(|p| raw.positions[p.0 as usize]).collect();
                     triangulate_polygon(&pts, &mut tri_buf, &mut scratch);
                 }
+                if raw.triangles.len() + tri_buf.len() > limits.max_triangles {
+                    return Err(ReadError::TooLarge {
+                        what: format!("triangles of the faces up to line {line_no}"),
+                        limit: limits.max_triangles,
+                    });
+                }
                 for t in &tri_buf {
                     raw.triangles
                         .push([poly[t[0]].0, poly[t[1]].0, poly[t[2]].0]);
@@ -199,31 +225,69 @@ pub fn read(bytes: &[u8]) -> Result<(RawMesh, Vec<Warning>), ReadError> {
                     }
                 }
             }
-            "o" => {
-                object = toks.collect::<Vec<_>>().join(" ");
+            "o" | "g" => {
+                let name = toks.collect::<Vec<_>>().join(" ");
+                let (kept, cut) = super::cap_name(&name);
+                if cut {
+                    names_cut += 1;
+                }
+                if key == "o" {
+                    object = kept.to_string();
+                } else {
+                    group = kept.to_string();
+                }
                 current = None;
             }
-            "g" => {
-                group = toks.collect::<Vec<_>>().join(" ");
-                current = None;
+            other => {
+                if let Some(n) = ignored.get_mut(other) {
+                    *n += 1;
+                } else if ignored.len() < MAX_IGNORED_KINDS {
+                    ignored.insert(other.to_string(), 1);
+                    ignored_order.push(other.to_string());
+                } else {
+                    ignored_other += 1;
+                }
             }
-            other => match ignored.iter_mut().find(|(k, _)| k == other) {
-                Some((_, n)) => *n += 1,
-                None => ignored.push((other.to_string(), 1)),
-            },
         }
     }
     let mut warnings = Vec::new();
     // Statements that carry no geometry we use are skipped; say so only for the unusual ones.
-    let unusual: Vec<String> = ignored
+    let unusual: Vec<&String> = ignored_order
         .iter()
-        .filter(|(k, _)| !matches!(k.as_str(), "s" | "usemtl" | "mtllib" | "vp"))
-        .map(|(k, n)| format!("{k} ({n})"))
+        .filter(|k| !matches!(k.as_str(), "s" | "usemtl" | "mtllib" | "vp"))
         .collect();
-    if !unusual.is_empty() {
+    if !unusual.is_empty() || ignored_other > 0 {
+        let mut shown: Vec<String> = unusual
+            .iter()
+            .take(10)
+            .map(|k| {
+                let (short, cut) = super::cap_name(k);
+                let short: String = short.chars().take(32).collect();
+                let ell = if cut || short.len() < k.len() {
+                    "…"
+                } else {
+                    ""
+                };
+                format!("{short}{ell} ({})", ignored[*k])
+            })
+            .collect();
+        let rest: usize =
+            unusual.iter().skip(10).map(|k| ignored[*k]).sum::<usize>() + ignored_other;
+        if rest > 0 {
+            shown.push(format!("{rest} more of other keywords"));
+        }
         warnings.push(Warning::new(
             "obj_statements_ignored",
-            format!("OBJ statements ignored: {}", unusual.join(", ")),
+            format!("OBJ statements ignored: {}", shown.join(", ")),
+        ));
+    }
+    if names_cut > 0 {
+        warnings.push(Warning::new(
+            "names_shortened",
+            format!(
+                "{names_cut} object or group names were longer than {} bytes and were cut",
+                super::MAX_NAME_BYTES
+            ),
         ));
     }
     if faces_with_uv == raw.triangles.len() && !raw.triangles.is_empty() {

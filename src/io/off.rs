@@ -16,6 +16,14 @@ fn syntax(line: usize, message: impl Into<String>) -> ReadError {
 
 /// Parse OFF bytes.
 pub fn read(bytes: &[u8]) -> Result<(RawMesh, Vec<Warning>), ReadError> {
+    read_limited(bytes, &super::Limits::default())
+}
+
+/// [`read`] within `limits` (the header's counts are checked before anything is read).
+pub fn read_limited(
+    bytes: &[u8],
+    limits: &super::Limits,
+) -> Result<(RawMesh, Vec<Warning>), ReadError> {
     let text = String::from_utf8_lossy(bytes);
     // Tokens with their line numbers, comments removed.
     let mut lines = text
@@ -50,6 +58,14 @@ pub fn read(bytes: &[u8]) -> Result<(RawMesh, Vec<Warning>), ReadError> {
     };
     let nv = count(0, "vertex")?;
     let nf = count(1, "face")?;
+    for (n, what) in [(nv, "vertices"), (nf, "faces")] {
+        if n > limits.max_triangles {
+            return Err(ReadError::TooLarge {
+                what: format!("the OFF header announces {n} {what}"),
+                limit: limits.max_triangles,
+            });
+        }
+    }
     let mut raw = RawMesh {
         // Capacity bounded by what the file can hold (a vertex line takes at least 6 bytes), so
         // a forged count cannot make us allocate; a short file then ends early with an error.
@@ -129,6 +145,12 @@ pub fn read(bytes: &[u8]) -> Result<(RawMesh, Vec<Warning>), ReadError> {
             pts.clear();
             pts.extend(poly.iter().map(|&i| raw.positions[i as usize]));
             triangulate_polygon(&pts, &mut tris, &mut scratch);
+        }
+        if raw.triangles.len() + tris.len() > limits.max_triangles {
+            return Err(ReadError::TooLarge {
+                what: format!("triangles of the polygons up to line {l}"),
+                limit: limits.max_triangles,
+            });
         }
         for t in &tris {
             raw.triangles.push([poly[t[0]], poly[t[1]], poly[t[2]]]);

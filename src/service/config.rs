@@ -55,6 +55,11 @@ pub struct Config {
     /// Largest request body (uploads), e.g. `256MiB`.
     #[arg(long, env = "FLATMESH_MAX_UPLOAD", default_value = "256MiB", value_parser = parse_size)]
     pub max_upload: usize,
+    /// Most triangles (and vertices) an uploaded mesh may expand to, after glTF instancing
+    /// and polygon triangulation, counted before it is read; beyond it the upload gets 413.
+    /// Parsing takes up to about 200 bytes per triangle, two uploads at a time.
+    #[arg(long, env = "FLATMESH_MAX_TRIANGLES", default_value_t = 2_000_000)]
+    pub max_triangles: usize,
     /// Most jobs waiting for a worker; beyond it submits get 429.
     #[arg(long, env = "FLATMESH_MAX_QUEUED", default_value_t = 64)]
     pub max_queued: usize,

@@ -136,6 +136,10 @@ async fn serve_async(cfg: Config) -> Result<(), String> {
         max_upload: cfg.max_upload,
         public_url: cfg.public_url.as_deref().map(Arc::from),
         api_keys: Arc::new(cfg.api_keys.clone()),
+        mesh_limits: crate::io::Limits {
+            max_triangles: cfg.max_triangles,
+        },
+        parse_slots: Arc::new(tokio::sync::Semaphore::new(state::PARSE_SLOTS)),
     };
     // Expired results go at a quarter of the retention, at most once a minute.
     let sweeper = exec.clone();

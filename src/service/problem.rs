@@ -147,7 +147,7 @@ pub const TYPES: &[(&str, &str, &str)] = &[
     ("method-not-allowed", "Method Not Allowed", "The route exists but not with this HTTP method."),
     ("request-timeout", "Request Timeout", "The request (an upload included) took longer than the server's request timeout."),
     ("conflict", "Conflict", "The resource is in a state that forbids the request: results of a job that has not succeeded, a mesh still used by a queued or running job, a cancel of a job that already succeeded or failed."),
-    ("payload-too-large", "Payload Too Large", "The body is larger than the server's upload limit."),
+    ("payload-too-large", "Payload Too Large", "The body is larger than the server's upload limit, or the mesh it holds expands to more triangles or vertices than the server's `--max-triangles` (counted after glTF instancing and polygon triangulation, before the mesh is read)."),
     ("unsupported-media-type", "Unsupported Media Type", "The body's media type is not one this route takes (meshes: model/gltf-binary, model/gltf+json, model/obj, application/octet-stream or multipart/form-data; jobs: application/json or multipart/form-data)."),
     ("invalid-request", "Unprocessable Content", "The request is well-formed but a member is wrong: `field` names it (`kind`, `params.tolerance`, `mesh_id`, `page_token`, …) and `detail` says what is expected. For a failed job: its input mesh or parameters turned out unusable."),
     ("queue-full", "Too Many Requests", "The job queue is full. Retry after the `Retry-After` seconds; polls and downloads are still served."),

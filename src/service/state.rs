@@ -23,4 +23,12 @@ pub struct AppState {
     pub api_keys: Arc<Vec<String>>,
     /// `--public-url`: the base of absolute URLs (else taken from each request).
     pub public_url: Option<Arc<str>>,
+    /// What an upload may expand to (`--max-triangles`).
+    pub mesh_limits: crate::io::Limits,
+    /// Meshes parsed at once ([`PARSE_SLOTS`]): parsing is where an upload's memory goes.
+    pub parse_slots: Arc<tokio::sync::Semaphore>,
 }
+
+/// Most meshes one process parses at once (uploads and reports); each takes up to about
+/// 200 bytes per triangle of `--max-triangles` while it is parsed and checked.
+pub const PARSE_SLOTS: usize = 2;

@@ -139,6 +139,13 @@ pub async fn get_mesh(
 pub async fn mesh_report(State(st): State<AppState>, Path(id): Path<String>) -> ApiResult {
     let rec = get_mesh_rec(&st, &id).await?;
     let store = st.store.clone();
+    // Parsed again, so under the same bound on parses at once as uploads.
+    let _slot = st
+        .parse_slots
+        .clone()
+        .acquire_owned()
+        .await
+        .map_err(|_| Problem::internal("parser slots closed"))?;
     let body = blocking(move || {
         let bytes = store
             .get_blob(&format!("meshes/{}", rec.id))?

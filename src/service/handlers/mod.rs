@@ -75,8 +75,17 @@ async fn store_mesh(
     if let Some(existing) = blocking(move || Ok(store.find_mesh_by_sha256(&sha)?)).await? {
         return Ok((existing, false));
     }
+    // Parsing is where an upload's memory goes: a bounded number at once, each bounded by
+    // the triangle limit (counted before the mesh is read).
+    let _slot = st
+        .parse_slots
+        .clone()
+        .acquire_owned()
+        .await
+        .map_err(|_| Problem::internal("parser slots closed"))?;
+    let limits = st.mesh_limits;
     let parsed = tokio::task::spawn_blocking(move || {
-        let r = io::load(&bytes, format).map(|(mesh, warnings)| {
+        let r = io::load_limited(&bytes, format, &limits).map(|(mesh, warnings)| {
             let report = crate::report::Report::compute(&mesh, &warnings);
             json!({
                 "vertices": report.vertices,
@@ -94,6 +103,16 @@ async fn store_mesh(
     .map_err(|e| Problem::internal(format!("mesh parser crashed: {e}")))?;
     let (bytes, summary) = parsed;
     let summary = summary.map_err(|e| {
+        if let io::ReadError::TooLarge { .. } = e {
+            return Problem::new(
+                axum::http::StatusCode::PAYLOAD_TOO_LARGE,
+                "payload-too-large",
+                format!(
+                    "{field_owned}: {e} by this server (--max-triangles); send a smaller \
+                     mesh or split it"
+                ),
+            );
+        }
         Problem::invalid(
             &field_owned,
             format!("invalid {} mesh: {e}", format.extension()),
