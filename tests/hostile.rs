@@ -386,3 +386,95 @@ async fn a_trailing_continuation_keeps_the_last_statement() {
     assert_eq!(r.status(), 201);
     assert_eq!(json_of(r, "Mesh").await["faces"], 2);
 }
+
+/// A job whose output would pass the triangle budget is refused at submit (422 naming
+/// `params.levels`), and a refused multipart submit (that, or a full queue) keeps none of
+/// the meshes it brought.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn refused_submits_keep_nothing() {
+    let s = Server::start(
+        &tmp("hostile-budget"),
+        &[
+            "--max-triangles",
+            "50000",
+            "--workers",
+            "1",
+            "--max-queued",
+            "1",
+        ],
+    );
+    let c = client();
+    let cone = upload(&c, &s, fixture("cone")).await; // 384 faces
+    for (kind, levels, ok) in [
+        ("subdivide", 3, true),  // 24,576 faces
+        ("subdivide", 5, false), // 393,216
+        ("develop", 2, true),    // Loop subdivision: 6,144
+        ("develop", 4, false),   // 98,304
+    ] {
+        let mut params = json!({"levels": levels});
+        if kind == "develop" {
+            params["method"] = json!("loop");
+        }
+        let body = json!({"kind": kind, "mesh_id": cone["id"], "params": params});
+        let r = c.post(s.url("/v1/jobs")).json(&body).send().await.unwrap();
+        if ok {
+            assert_eq!(r.status(), 202, "{body}");
+            let j = json_of(r, "Job").await;
+            c.post(s.url(&format!("/v1/jobs/{}/cancel", j["id"].as_str().unwrap())))
+                .send()
+                .await
+                .unwrap();
+        } else {
+            let p = problem(r, 422).await;
+            assert_eq!(p["field"], "params.levels", "{p}");
+            assert!(
+                p["detail"].as_str().unwrap().contains("--max-triangles"),
+                "{p}"
+            );
+        }
+    }
+    let listed = |v: serde_json::Value| v["meshes"].as_array().unwrap().len();
+    let meshes = |c: reqwest::Client, url: String| async move {
+        listed(json_of(c.get(url).send().await.unwrap(), "MeshList").await)
+    };
+    let before = meshes(c.clone(), s.url("/v1/meshes")).await;
+    // Over budget, by multipart with a mesh of its own.
+    let form = reqwest::multipart::Form::new()
+        .part(
+            "job",
+            reqwest::multipart::Part::text(
+                json!({"kind": "subdivide", "params": {"levels": 6}}).to_string(),
+            )
+            .mime_str("application/json")
+            .unwrap(),
+        )
+        .part("mesh", obj_part("saddle", "saddle.obj"));
+    problem(post_jobs_form(&c, &s, form).await, 422).await;
+    assert_eq!(meshes(c.clone(), s.url("/v1/meshes")).await, before);
+    // A full queue: a slow job running, one queued, then a multipart submit.
+    let slow = upload(&c, &s, slow_obj()).await;
+    let params: serde_json::Value = serde_json::from_str(SLOW).unwrap();
+    let a = submit(
+        &c,
+        &s,
+        json!({"kind": "flatten", "mesh_id": slow["id"], "params": params}),
+    )
+    .await;
+    wait_for(&c, &s, a["id"].as_str().unwrap(), &["running"]).await;
+    submit(&c, &s, json!({"kind": "report", "mesh_id": slow["id"]})).await;
+    let before = meshes(c.clone(), s.url("/v1/meshes")).await;
+    let form = reqwest::multipart::Form::new()
+        .part(
+            "job",
+            reqwest::multipart::Part::text(json!({"kind": "report"}).to_string())
+                .mime_str("application/json")
+                .unwrap(),
+        )
+        .part("mesh", obj_part("two_holes", "two_holes.obj"));
+    problem(post_jobs_form(&c, &s, form).await, 429).await;
+    assert_eq!(meshes(c.clone(), s.url("/v1/meshes")).await, before);
+    c.post(s.url(&format!("/v1/jobs/{}/cancel", a["id"].as_str().unwrap())))
+        .send()
+        .await
+        .unwrap();
+}

@@ -281,6 +281,17 @@ impl JobSpec {
         }
     }
 
+    /// Most faces a mesh the job makes can have, from its input's (each subdivision level
+    /// multiplies them by four): what a server checks against its budget before queueing.
+    pub fn output_faces(&self, input_faces: usize) -> usize {
+        let levels = match self {
+            JobSpec::Subdivide(p) => p.levels,
+            JobSpec::Develop(p) if p.method == develop::Method::Loop => p.levels,
+            _ => 0,
+        };
+        input_faces.saturating_mul(4usize.saturating_pow(levels.min(64) as u32))
+    }
+
     /// Its kind.
     pub fn kind(&self) -> Kind {
         match self {

@@ -317,6 +317,20 @@ async fn insert_job(
     req: Request,
     stored_here: Vec<String>,
 ) -> ApiResult {
+    // What the job would make, against the same budget as an upload.
+    let spec = JobSpec::parse(&req.submit.kind, &req.submit.params).map_err(spec_problem)?;
+    let out = spec.output_faces(req.faces);
+    if out > st.mesh_limits.max_triangles {
+        forget_uploads(st, stored_here).await?;
+        return Err(Problem::invalid(
+            "params.levels",
+            format!(
+                "this job would make a mesh of {out} faces from {}; this server allows {} \
+                 (--max-triangles): fewer levels, or a coarser mesh",
+                req.faces, st.mesh_limits.max_triangles
+            ),
+        ));
+    }
     let mut record = JobRecord::queued(
         &new_id("j"),
         &req.submit.kind,
@@ -351,7 +365,11 @@ async fn insert_job(
             .eta
             .after_submit(&req.submit.kind, req.faces, queued, st.exec.limits.workers);
     match inserted {
-        None => Err(queue_full(st)),
+        None => {
+            // Nothing is kept for a refused request.
+            forget_uploads(st, stored_here).await?;
+            Err(queue_full(st))
+        }
         Some(Inserted::New(j)) => {
             let exec = st.exec.clone();
             // Counting the queue for the metrics reads the store: off the async threads.
@@ -362,18 +380,30 @@ async fn insert_job(
         Some(Inserted::Existing(j)) => {
             // A concurrent retry with the same key won the race: the meshes stored for this
             // request are not referenced by any job.
-            let store = st.store.clone();
-            let _ = blocking(move || {
-                for id in stored_here {
-                    store.delete_mesh(&id)?;
-                    store.delete_blobs(&format!("meshes/{id}"))?;
-                }
-                Ok(())
-            })
-            .await;
+            let _ = forget_uploads(st, stored_here).await;
             submitted(st, base, j, &req.hash, true, retry)
         }
     }
+}
+
+/// Delete the meshes a multipart submit stored when no job will use them (the submit was
+/// refused, or lost an idempotency race).
+async fn forget_uploads(st: &AppState, stored_here: Vec<String>) -> Result<(), Problem> {
+    if stored_here.is_empty() {
+        return Ok(());
+    }
+    let store = st.store.clone();
+    blocking(move || {
+        for id in stored_here {
+            // Another request may have been given this mesh by its hash meanwhile.
+            if !store.mesh_in_use(&id)? {
+                store.delete_mesh(&id)?;
+                store.delete_blobs(&format!("meshes/{id}"))?;
+            }
+        }
+        Ok(())
+    })
+    .await
 }
 
 /// The 202 for a new or replayed job; a replay whose request differs is refused.
