@@ -478,3 +478,78 @@ async fn refused_submits_keep_nothing() {
         .await
         .unwrap();
 }
+
+/// Slowloris: connections that never finish their request head, and more of them than the
+/// server takes at once. The server closes each after `--header-timeout`, and a health check
+/// made meanwhile is answered as soon as a slot frees; an idle keep-alive connection is closed
+/// the same way.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn slow_and_idle_connections_are_dropped() {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let s = Server::start(
+        &tmp("hostile-slowloris"),
+        &["--header-timeout", "1s", "--max-connections", "20"],
+    );
+    let addr = s.base.strip_prefix("http://").unwrap().to_string();
+    let mut idle = Vec::new();
+    for _ in 0..60 {
+        // Connections beyond the cap wait in the kernel's backlog.
+        let mut t = tokio::net::TcpStream::connect(&addr).await.unwrap();
+        let _ = t.write_all(b"GET /healthz HTTP/1.1\r\nhost: x\r\n").await;
+        idle.push(t);
+    }
+    let t0 = Instant::now();
+    let r = reqwest::Client::builder()
+        .timeout(Duration::from_secs(20))
+        .build()
+        .unwrap()
+        .get(s.url("/healthz"))
+        .send()
+        .await
+        .expect("health check while 60 connections hang");
+    assert_eq!(r.status(), 200);
+    println!(
+        "health check answered after {:.2} s",
+        t0.elapsed().as_secs_f64()
+    );
+    // The first twenty were accepted and must have been closed by now (EOF or reset).
+    for (k, t) in idle.iter_mut().take(20).enumerate() {
+        let mut buf = [0u8; 256];
+        let n = tokio::time::timeout(Duration::from_secs(5), t.read(&mut buf))
+            .await
+            .unwrap_or_else(|_| panic!("connection {k} still open"));
+        if let Ok(n) = n {
+            // hyper may answer 408 before closing; then the next read is the end.
+            if n > 0 {
+                let text = String::from_utf8_lossy(&buf[..n]).to_string();
+                assert!(text.starts_with("HTTP/1.1 408"), "{text}");
+            }
+        }
+    }
+    // A keep-alive connection left idle after a request is closed too.
+    let mut t = tokio::net::TcpStream::connect(&addr).await.unwrap();
+    t.write_all(b"GET /healthz HTTP/1.1\r\nhost: x\r\n\r\n")
+        .await
+        .unwrap();
+    let mut buf = vec![0u8; 4096];
+    let n = t.read(&mut buf).await.unwrap();
+    assert!(String::from_utf8_lossy(&buf[..n]).starts_with("HTTP/1.1 200"));
+    let t1 = Instant::now();
+    let closed = tokio::time::timeout(Duration::from_secs(10), async {
+        loop {
+            match t.read(&mut buf).await {
+                Ok(0) | Err(_) => return,
+                Ok(_) => {}
+            }
+        }
+    })
+    .await;
+    assert!(
+        closed.is_ok(),
+        "an idle keep-alive connection stayed open 10 s"
+    );
+    println!(
+        "idle keep-alive closed after {:.2} s",
+        t1.elapsed().as_secs_f64()
+    );
+}

@@ -107,6 +107,14 @@ pub struct Config {
     /// Deadline of one HTTP request (uploads included), e.g. `5m`.
     #[arg(long, env = "FLATMESH_REQUEST_TIMEOUT", default_value = "5m", value_parser = parse_duration)]
     pub request_timeout: Duration,
+    /// Most client connections open at once; further ones wait to be accepted. Each takes a
+    /// file descriptor: allow this plus about 256 (`ulimit -n`).
+    #[arg(long, env = "FLATMESH_MAX_CONNECTIONS", default_value_t = 1024)]
+    pub max_connections: usize,
+    /// Time a client has to send a request's head (request line and headers), and most time
+    /// a keep-alive connection stays idle, e.g. `10s`.
+    #[arg(long, env = "FLATMESH_HEADER_TIMEOUT", default_value = "10s", value_parser = parse_duration)]
+    pub header_timeout: Duration,
     /// Delays between webhook attempts, comma-separated (e.g. `1s,5s,30s,2m,10m`).
     #[arg(long, env = "FLATMESH_WEBHOOK_BACKOFF", value_delimiter = ',', value_parser = parse_duration, default_value = "1s,5s,30s,2m,10m")]
     pub webhook_backoff: Vec<Duration>,

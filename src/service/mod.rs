@@ -12,6 +12,7 @@
 
 pub mod client;
 pub mod config;
+pub mod connections;
 pub mod domain;
 pub mod eta;
 pub mod handlers;
@@ -178,10 +179,12 @@ async fn serve_async(cfg: Config) -> Result<(), String> {
     use std::io::Write;
     let _ = std::io::stdout().flush();
     tracing::info!(%addr, "serving");
-    axum::serve(listener, app)
-        .with_graceful_shutdown(shutdown())
-        .await
-        .map_err(|e| e.to_string())
+    let limits = connections::ConnLimits {
+        max_connections: cfg.max_connections,
+        header_timeout: cfg.header_timeout,
+    };
+    connections::serve(listener, app, limits, shutdown()).await;
+    Ok(())
 }
 
 async fn shutdown() {
