@@ -71,6 +71,10 @@ pub struct MeshRecord {
     pub sha256: String,
     /// Summary shown to clients (vertices, faces, patches, max ϖ, warnings).
     pub summary: serde_json::Value,
+    /// Whose it is: the tenant of the API key that uploaded it (`""`: the default tenant,
+    /// of bare keys and of a server without keys). Only its tenant sees it.
+    #[serde(default)]
+    pub tenant: String,
 }
 
 /// A job as stored.
@@ -118,6 +122,8 @@ pub struct JobRecord {
     /// The API's base URL as the submitting client reached it (`https://host[/prefix]`),
     /// for the absolute links of the job's webhook when no public URL is configured.
     pub base_url: Option<String>,
+    /// Whose it is (as [`MeshRecord::tenant`]).
+    pub tenant: String,
 }
 
 impl JobRecord {
@@ -144,6 +150,7 @@ impl JobRecord {
             idempotency_key: None,
             request_hash: None,
             base_url: None,
+            tenant: String::new(),
         }
     }
 }

@@ -22,6 +22,7 @@ pub mod router;
 pub mod state;
 pub mod store;
 pub mod telemetry;
+pub mod tenants;
 pub mod views;
 pub mod webhook;
 pub mod worker;
@@ -77,13 +78,8 @@ async fn open_store(cfg: &Config) -> Result<Arc<dyn Store>, String> {
 async fn serve_async(cfg: Config) -> Result<(), String> {
     // An empty key would otherwise be dropped and, if it was the only one, turn
     // authentication off without a word.
-    if cfg.api_keys.iter().any(|k| k.trim().is_empty()) {
-        return Err(
-            "--api-key / FLATMESH_API_KEYS: an empty key (give non-empty keys, \
-                    comma-separated, or none to run without authentication)"
-                .into(),
-        );
-    }
+    let api_keys = tenants::parse_api_keys(&cfg.api_keys)
+        .map_err(|e| format!("--api-key / FLATMESH_API_KEYS: {e}"))?;
     std::fs::create_dir_all(&cfg.data_dir)
         .map_err(|e| format!("cannot create {}: {e}", cfg.data_dir.display()))?;
     let store = open_store(&cfg).await?;
@@ -136,7 +132,7 @@ async fn serve_async(cfg: Config) -> Result<(), String> {
         webhooks,
         max_upload: cfg.max_upload,
         public_url: cfg.public_url.as_deref().map(Arc::from),
-        api_keys: Arc::new(cfg.api_keys.clone()),
+        api_keys: Arc::new(api_keys),
         mesh_limits: crate::io::Limits {
             max_triangles: cfg.max_triangles,
         },

@@ -19,8 +19,8 @@ pub struct AppState {
     pub webhooks: Arc<Webhooks>,
     /// Largest body.
     pub max_upload: usize,
-    /// Bearer keys accepted on /v1 (none: open).
-    pub api_keys: Arc<Vec<String>>,
+    /// Bearer keys accepted on /v1, each with its tenant (none: open, one tenant).
+    pub api_keys: Arc<Vec<super::tenants::ApiKey>>,
     /// `--public-url`: the base of absolute URLs (else taken from each request).
     pub public_url: Option<Arc<str>>,
     /// What an upload may expand to (`--max-triangles`).

@@ -740,6 +740,7 @@ mod tests {
                 size: obj.len() as u64,
                 sha256: String::new(),
                 summary: serde_json::json!({}),
+                tenant: String::new(),
             })
             .unwrap();
         for (id, boom) in [("j1", true), ("j2", false)] {

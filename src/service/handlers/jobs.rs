@@ -10,10 +10,11 @@ use crate::service::domain::{now_ms, JobRecord, Status};
 use crate::service::problem::Problem;
 use crate::service::state::AppState;
 use crate::service::store::{Inserted, JobFilter};
+use crate::service::tenants::{scoped_key, Tenant};
 use crate::service::views::job_json;
 use crate::service::webhook;
 use axum::body::Bytes;
-use axum::extract::{Multipart, Path, Query, State};
+use axum::extract::{Extension, Multipart, Path, Query, State};
 use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
 use axum::response::IntoResponse;
 use axum::Json;
@@ -131,14 +132,15 @@ fn queue_full(st: &AppState) -> Problem {
 /// with its job, and only then are uploads stored and the job inserted.
 pub async fn submit_job(
     State(st): State<AppState>,
+    Extension(tenant): Extension<Tenant>,
     headers: HeaderMap,
     request: axum::extract::Request,
 ) -> ApiResult {
-    let key = idempotency_key(&headers)?;
+    let key = idempotency_key(&headers)?.map(|k| scoped_key(&tenant, &k));
     let base = request_base(&st, &headers);
     let media = media_type(&headers).unwrap_or_default();
     let mut req = match media.as_str() {
-        "application/json" => read_json_submit(&st, request).await?,
+        "application/json" => read_json_submit(&st, &tenant, request).await?,
         "multipart/form-data" => read_multipart_submit(&st, request).await?,
         _ => {
             return Err(Problem::unsupported_media(format!(
@@ -156,7 +158,7 @@ pub async fn submit_job(
     // The uploads are validated like POST /v1/meshes and then referenced by id.
     let mut stored_here = Vec::new();
     for (field, bytes, format) in std::mem::take(&mut req.uploads) {
-        let (rec, created) = store_mesh(&st, bytes, format, field).await?;
+        let (rec, created) = store_mesh(&st, &tenant, bytes, format, field).await?;
         if field == "mesh" {
             req.faces = mesh_faces(&rec);
         }
@@ -169,7 +171,7 @@ pub async fn submit_job(
             stored_here.push(id);
         }
     }
-    insert_job(&st, &base, key, req, stored_here).await
+    insert_job(&st, &tenant, &base, key, req, stored_here).await
 }
 
 /// Faces of a stored mesh, from its summary.
@@ -215,6 +217,7 @@ fn request_hash(mut hasher: Sha256, s: &Submit) -> String {
 /// A JSON submit: the meshes it names must exist.
 async fn read_json_submit(
     st: &AppState,
+    tenant: &Tenant,
     request: axum::extract::Request,
 ) -> Result<Request, Problem> {
     let body = axum::body::to_bytes(request.into_body(), st.max_upload)
@@ -235,7 +238,7 @@ async fn read_json_submit(
         ("reference_mesh_id", &submit.reference_mesh_id),
     ] {
         if let Some(id) = id {
-            let Ok(rec) = get_mesh_rec(st, id).await else {
+            let Ok(rec) = get_mesh_rec(st, tenant, id).await else {
                 return Err(Problem::invalid(field, format!("no mesh `{id}`")));
             };
             if field == "mesh_id" {
@@ -312,6 +315,7 @@ async fn read_multipart_submit(
 /// meshes stored for a request that lost an idempotency race are deleted again.
 async fn insert_job(
     st: &AppState,
+    tenant: &Tenant,
     base: &str,
     key: Option<String>,
     req: Request,
@@ -341,6 +345,7 @@ async fn insert_job(
     record.params = req.submit.params;
     record.callback_url = req.submit.callback_url;
     record.idempotency_key = key;
+    record.tenant = tenant.0.clone();
     record.request_hash = Some(req.hash.clone());
     record.base_url = Some(base.to_string()).filter(|b| !b.is_empty());
     let (store, exec) = (st.store.clone(), st.exec.clone());
@@ -439,7 +444,7 @@ fn submitted(
 /// SQLite reader: a primary-key read in WAL mode never waits for the writer) it is asked on
 /// this thread, since the hand-off to a blocking thread costs more than the read (status poll
 /// p99 with both workers busy 4.8 -> 3.3-4.1 ms in `benches/service_load.rs`).
-async fn get_job_rec(st: &AppState, id: &str) -> Result<JobRecord, Problem> {
+async fn get_job_rec(st: &AppState, tenant: &Tenant, id: &str) -> Result<JobRecord, Problem> {
     let found = if let Some(fut) = st.store.get_job_async(id) {
         fut.await?
     } else {
@@ -452,7 +457,9 @@ async fn get_job_rec(st: &AppState, id: &str) -> Result<JobRecord, Problem> {
             }
         }
     };
-    found.ok_or_else(|| Problem::not_found("job", id))
+    found
+        .filter(|j| j.tenant == tenant.0)
+        .ok_or_else(|| Problem::not_found("job", id))
 }
 
 fn live_progress(st: &AppState, j: &JobRecord) -> Option<Value> {
@@ -467,10 +474,11 @@ fn live_progress(st: &AppState, j: &JobRecord) -> Option<Value> {
 /// `GET /v1/jobs/{id}`, with a strong ETag and `If-None-Match` → 304.
 pub async fn get_job(
     State(st): State<AppState>,
+    Extension(tenant): Extension<Tenant>,
     Path(id): Path<String>,
     headers: HeaderMap,
 ) -> ApiResult {
-    let j = get_job_rec(&st, &id).await?;
+    let j = get_job_rec(&st, &tenant, &id).await?;
     let base = request_base(&st, &headers);
     let mut res = json_with_etag(&headers, &job_json(&j, live_progress(&st, &j), &base));
     if !j.status.is_terminal() {
@@ -487,6 +495,7 @@ pub async fn get_job(
 /// `GET /v1/jobs?status=&kind=&page_size=&page_token=`, newest first.
 pub async fn list_jobs(
     State(st): State<AppState>,
+    Extension(tenant): Extension<Tenant>,
     Query(q): Query<HashMap<String, String>>,
     headers: HeaderMap,
 ) -> ApiResult {
@@ -518,6 +527,7 @@ pub async fn list_jobs(
         .map(|t| page_token::decode(t, &listing).map_err(|e| Problem::invalid("page_token", e)))
         .transpose()?;
     let filter = JobFilter {
+        tenant: tenant.0,
         status,
         kind,
         before_seq,
@@ -544,9 +554,11 @@ pub async fn list_jobs(
 /// ended otherwise.
 pub async fn cancel_job(
     State(st): State<AppState>,
+    Extension(tenant): Extension<Tenant>,
     Path(id): Path<String>,
     headers: HeaderMap,
 ) -> ApiResult {
+    get_job_rec(&st, &tenant, &id).await?;
     let base = request_base(&st, &headers);
     let exec = st.exec.clone();
     let id2 = id.clone();
@@ -568,7 +580,12 @@ pub async fn cancel_job(
 }
 
 /// `DELETE /v1/jobs/{id}`: the job and its results (a running job is cancelled).
-pub async fn delete_job(State(st): State<AppState>, Path(id): Path<String>) -> ApiResult {
+pub async fn delete_job(
+    State(st): State<AppState>,
+    Extension(tenant): Extension<Tenant>,
+    Path(id): Path<String>,
+) -> ApiResult {
+    get_job_rec(&st, &tenant, &id).await?;
     let exec = st.exec.clone();
     let id2 = id.clone();
     if blocking(move || Ok(exec.delete(&id2)?)).await? {
@@ -593,12 +610,13 @@ fn accepts_only_octets(headers: &HeaderMap, media: &str) -> bool {
 /// A succeeded job's file, with a strong ETag (`If-None-Match` → 304 without reading it).
 async fn artifact(
     st: &AppState,
+    tenant: &Tenant,
     headers: &HeaderMap,
     id: &str,
     name: &str,
     media: &str,
 ) -> ApiResult {
-    let j = get_job_rec(st, id).await?;
+    let j = get_job_rec(st, tenant, id).await?;
     if j.status != Status::Succeeded {
         return Err(Problem::conflict(format!(
             "job `{id}` has no results: it is {}",
@@ -666,10 +684,19 @@ async fn artifact(
 /// `GET /v1/jobs/{id}/result`: the report JSON of the output mesh (per-vertex ϖ).
 pub async fn job_result(
     State(st): State<AppState>,
+    Extension(tenant): Extension<Tenant>,
     Path(id): Path<String>,
     headers: HeaderMap,
 ) -> ApiResult {
-    artifact(&st, &headers, &id, "report.json", "application/json").await
+    artifact(
+        &st,
+        &tenant,
+        &headers,
+        &id,
+        "report.json",
+        "application/json",
+    )
+    .await
 }
 
 fn format_param(
@@ -691,6 +718,7 @@ fn format_param(
 /// `GET /v1/jobs/{id}/mesh?format=glb|gltf|obj`.
 pub async fn job_mesh(
     State(st): State<AppState>,
+    Extension(tenant): Extension<Tenant>,
     Path(id): Path<String>,
     Query(q): Query<HashMap<String, String>>,
     headers: HeaderMap,
@@ -715,12 +743,13 @@ pub async fn job_mesh(
             }
         },
     };
-    artifact(&st, &headers, &id, &name, media).await
+    artifact(&st, &tenant, &headers, &id, &name, media).await
 }
 
 /// `GET /v1/jobs/{id}/patterns?format=json|svg|dxf` (jobs that flatten).
 pub async fn job_patterns(
     State(st): State<AppState>,
+    Extension(tenant): Extension<Tenant>,
     Path(id): Path<String>,
     Query(q): Query<HashMap<String, String>>,
     headers: HeaderMap,
@@ -732,5 +761,5 @@ pub async fn job_patterns(
         _ => "image/vnd.dxf",
     };
     let name = format!("patterns.{f}");
-    artifact(&st, &headers, &id, &name, media).await
+    artifact(&st, &tenant, &headers, &id, &name, media).await
 }

@@ -8,8 +8,9 @@ use super::{ApiResult, MESH_TYPES};
 use crate::io;
 use crate::service::problem::Problem;
 use crate::service::state::AppState;
+use crate::service::tenants::Tenant;
 use crate::service::views::mesh_json;
-use axum::extract::{Multipart, Path, Query, State};
+use axum::extract::{Extension, Multipart, Path, Query, State};
 use axum::http::{header, HeaderMap, StatusCode};
 use axum::response::IntoResponse;
 use std::collections::HashMap;
@@ -18,6 +19,7 @@ use std::collections::HashMap;
 /// clients that can only send `application/octet-stream`).
 pub async fn upload_mesh(
     State(st): State<AppState>,
+    Extension(tenant): Extension<Tenant>,
     Query(q): Query<HashMap<String, String>>,
     headers: HeaderMap,
     request: axum::extract::Request,
@@ -42,7 +44,7 @@ pub async fn upload_mesh(
         while let Some(field) = mp.next_field().await.map_err(multipart_err)? {
             if field.name() == Some("mesh") && rec.is_none() {
                 let (bytes, format) = mesh_part(field, "mesh").await?;
-                rec = Some(store_mesh(&st, bytes, format, "mesh").await?);
+                rec = Some(store_mesh(&st, &tenant, bytes, format, "mesh").await?);
             }
         }
         rec.ok_or_else(|| Problem::invalid("mesh", "the multipart body has no `mesh` part"))?
@@ -76,7 +78,7 @@ pub async fn upload_mesh(
                     ))
                 }
             })?;
-        store_mesh(&st, bytes, format, "body").await?
+        store_mesh(&st, &tenant, bytes, format, "body").await?
     };
     let (rec, created) = rec;
     let base = request_base(&st, &headers);
@@ -95,6 +97,7 @@ pub async fn upload_mesh(
 /// `GET /v1/meshes?page_size=&page_token=`, newest first.
 pub async fn list_meshes(
     State(st): State<AppState>,
+    Extension(tenant): Extension<Tenant>,
     Query(q): Query<HashMap<String, String>>,
     headers: HeaderMap,
 ) -> ApiResult {
@@ -108,7 +111,7 @@ pub async fn list_meshes(
     let store = st.store.clone();
     let mut meshes = blocking(move || {
         let after = after.as_ref().map(|(at, id)| (*at, id.as_str()));
-        Ok(store.list_meshes(after, limit + 1)?)
+        Ok(store.list_meshes(&tenant.0, after, limit + 1)?)
     })
     .await?;
     let next = if meshes.len() > limit {
@@ -127,17 +130,22 @@ pub async fn list_meshes(
 /// `GET /v1/meshes/{id}`, with a strong ETag and `If-None-Match` → 304.
 pub async fn get_mesh(
     State(st): State<AppState>,
+    Extension(tenant): Extension<Tenant>,
     Path(id): Path<String>,
     headers: HeaderMap,
 ) -> ApiResult {
-    let rec = get_mesh_rec(&st, &id).await?;
+    let rec = get_mesh_rec(&st, &tenant, &id).await?;
     let base = request_base(&st, &headers);
     Ok(json_with_etag(&headers, &mesh_json(&rec, &base)))
 }
 
 /// `GET /v1/meshes/{id}/report`: the flattenability report, computed now.
-pub async fn mesh_report(State(st): State<AppState>, Path(id): Path<String>) -> ApiResult {
-    let rec = get_mesh_rec(&st, &id).await?;
+pub async fn mesh_report(
+    State(st): State<AppState>,
+    Extension(tenant): Extension<Tenant>,
+    Path(id): Path<String>,
+) -> ApiResult {
+    let rec = get_mesh_rec(&st, &tenant, &id).await?;
     let store = st.store.clone();
     // Parsed again, so under the same bound on parses at once as uploads.
     let _slot = st
@@ -162,11 +170,15 @@ pub async fn mesh_report(State(st): State<AppState>, Path(id): Path<String>) -> 
 }
 
 /// `DELETE /v1/meshes/{id}`: 409 while a queued or running job uses it.
-pub async fn delete_mesh(State(st): State<AppState>, Path(id): Path<String>) -> ApiResult {
+pub async fn delete_mesh(
+    State(st): State<AppState>,
+    Extension(tenant): Extension<Tenant>,
+    Path(id): Path<String>,
+) -> ApiResult {
     let store = st.store.clone();
     let id2 = id.clone();
     blocking(move || {
-        if store.get_mesh(&id2)?.is_none() {
+        if store.get_mesh(&id2)?.is_none_or(|m| m.tenant != tenant.0) {
             return Err(Problem::not_found("mesh", &id2));
         }
         if store.mesh_in_use(&id2)? {

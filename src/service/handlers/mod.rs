@@ -9,6 +9,7 @@ mod page_token;
 use super::domain::{now_ms, MeshRecord};
 use super::problem::{self, Problem};
 use super::state::AppState;
+use super::tenants::Tenant;
 use crate::io;
 use axum::body::Bytes;
 use axum::http::{header, HeaderMap, HeaderValue};
@@ -65,14 +66,15 @@ const MESH_TYPES: &str = "model/gltf-binary, model/gltf+json, model/obj or multi
 /// `false` for "not created here".
 async fn store_mesh(
     st: &AppState,
+    tenant: &Tenant,
     bytes: Bytes,
     format: io::Format,
     field: &str,
 ) -> Result<(MeshRecord, bool), Problem> {
     let field_owned = field.to_string();
     let sha256 = sha256_hex(&bytes);
-    let (store, sha) = (st.store.clone(), sha256.clone());
-    if let Some(existing) = blocking(move || Ok(store.find_mesh_by_sha256(&sha)?)).await? {
+    let (store, sha, who) = (st.store.clone(), sha256.clone(), tenant.0.clone());
+    if let Some(existing) = blocking(move || Ok(store.find_mesh_by_sha256(&who, &sha)?)).await? {
         return Ok((existing, false));
     }
     // Parsing is where an upload's memory goes: a bounded number at once, each bounded by
@@ -125,6 +127,7 @@ async fn store_mesh(
         size: bytes.len() as u64,
         sha256,
         summary,
+        tenant: tenant.0.clone(),
     };
     let store = st.store.clone();
     let r2 = rec.clone();
@@ -279,12 +282,13 @@ async fn blocking<T: Send + 'static>(
         .map_err(|e| Problem::internal(format!("worker crashed: {e}")))?
 }
 
-/// A mesh record by id (404 when absent).
-async fn get_mesh_rec(st: &AppState, id: &str) -> Result<MeshRecord, Problem> {
+/// A mesh record by id (404 when absent or another tenant's).
+async fn get_mesh_rec(st: &AppState, tenant: &Tenant, id: &str) -> Result<MeshRecord, Problem> {
     let store = st.store.clone();
     let id2 = id.to_string();
     blocking(move || Ok(store.get_mesh(&id2)?))
         .await?
+        .filter(|m| m.tenant == tenant.0)
         .ok_or_else(|| Problem::not_found("mesh", id))
 }
 

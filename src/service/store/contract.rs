@@ -136,6 +136,7 @@ fn meshes_and_blobs(s: &dyn Store) {
         size: 1 << 40,
         sha256: "ab".repeat(32),
         summary: serde_json::json!({"vertices": 3, "name": "ünïcode ✓"}),
+        tenant: "acme".into(),
     };
     assert!(s.get_mesh("m_1").unwrap().is_none());
     s.insert_mesh(&m).unwrap();
@@ -178,7 +179,8 @@ fn meshes_and_blobs(s: &dyn Store) {
     meshes_index(s);
 }
 
-/// Listing (newest first, paged by position), lookup by content, and unused uploads.
+/// Listing (newest first, paged by position, one tenant's), lookup by content (within a
+/// tenant), and unused uploads.
 fn meshes_index(s: &dyn Store) {
     let mesh = |id: &str, created_at: i64, sha: &str| MeshRecord {
         id: id.into(),
@@ -187,7 +189,26 @@ fn meshes_index(s: &dyn Store) {
         size: 3,
         sha256: sha.repeat(64),
         summary: serde_json::json!({"faces": 1}),
+        tenant: String::new(),
     };
+    // Another tenant's upload of the same bytes, listed and found only for that tenant.
+    let other = MeshRecord {
+        tenant: "other".into(),
+        ..mesh("m_other", 5, "a")
+    };
+    s.insert_mesh(&other).unwrap();
+    assert_eq!(
+        ids_of(s.list_meshes("other", None, 10).unwrap()),
+        ["m_other"]
+    );
+    assert_eq!(
+        s.find_mesh_by_sha256("other", &"a".repeat(64)).unwrap(),
+        Some(other.clone())
+    );
+    assert!(s
+        .find_mesh_by_sha256("", &"a".repeat(64))
+        .unwrap()
+        .is_none());
     let ids = |v: Vec<MeshRecord>| v.into_iter().map(|m| m.id).collect::<Vec<_>>();
     for m in [
         mesh("m_a", 10, "a"),
@@ -196,17 +217,30 @@ fn meshes_index(s: &dyn Store) {
     ] {
         s.insert_mesh(&m).unwrap();
     }
-    assert_eq!(ids(s.list_meshes(None, 10).unwrap()), ["m_c", "m_b", "m_a"]);
-    assert_eq!(ids(s.list_meshes(None, 1).unwrap()), ["m_c"]);
-    assert_eq!(ids(s.list_meshes(Some((20, "m_c")), 1).unwrap()), ["m_b"]);
-    assert_eq!(ids(s.list_meshes(Some((20, "m_b")), 5).unwrap()), ["m_a"]);
-    assert!(s.list_meshes(Some((10, "m_a")), 5).unwrap().is_empty());
-    // the same bytes: the oldest upload
     assert_eq!(
-        s.find_mesh_by_sha256(&"a".repeat(64)).unwrap().unwrap(),
+        ids(s.list_meshes("", None, 10).unwrap()),
+        ["m_c", "m_b", "m_a"]
+    );
+    assert_eq!(ids(s.list_meshes("", None, 1).unwrap()), ["m_c"]);
+    assert_eq!(
+        ids(s.list_meshes("", Some((20, "m_c")), 1).unwrap()),
+        ["m_b"]
+    );
+    assert_eq!(
+        ids(s.list_meshes("", Some((20, "m_b")), 5).unwrap()),
+        ["m_a"]
+    );
+    assert!(s.list_meshes("", Some((10, "m_a")), 5).unwrap().is_empty());
+    // the same bytes: the tenant's oldest upload
+    assert_eq!(
+        s.find_mesh_by_sha256("", &"a".repeat(64)).unwrap().unwrap(),
         mesh("m_a", 10, "a")
     );
-    assert!(s.find_mesh_by_sha256(&"f".repeat(64)).unwrap().is_none());
+    assert!(s
+        .find_mesh_by_sha256("", &"f".repeat(64))
+        .unwrap()
+        .is_none());
+    assert!(s.delete_mesh("m_other").unwrap());
     // unused: uploaded before the cut-off and named by no job (of any status)
     let mut j = JobRecord::queued("j_uses_a", "report", "m_b", 30);
     j.reference_mesh_id = Some("m_a".into());
@@ -218,7 +252,11 @@ fn meshes_index(s: &dyn Store) {
     assert!(s.delete_job("j_uses_a").unwrap());
     assert_eq!(s.delete_unused_meshes(15).unwrap(), ["m_a"]);
     assert_eq!(s.delete_unused_meshes(100).unwrap(), ["m_b"]);
-    assert!(s.list_meshes(None, 10).unwrap().is_empty());
+    assert!(s.list_meshes("", None, 10).unwrap().is_empty());
+}
+
+fn ids_of(v: Vec<MeshRecord>) -> Vec<String> {
+    v.into_iter().map(|m| m.id).collect()
 }
 
 fn jobs_index(s: &dyn Store, open: &dyn Fn() -> Arc<dyn Store>) {
@@ -273,6 +311,25 @@ fn jobs_index(s: &dyn Store, open: &dyn Fn() -> Arc<dyn Store>) {
         .unwrap();
     let ids: Vec<&str> = all.iter().map(|j| j.id.as_str()).collect();
     assert_eq!(ids, ["j_l2", "j_l1", "j_l0", "j_i1"]);
+    // another tenant's job is listed only for that tenant, and its tenant round-trips
+    let mut theirs = JobRecord::queued("j_theirs", "report", "m_a", 31);
+    theirs.tenant = "acme".into();
+    s.insert_job(&theirs).unwrap();
+    assert_eq!(s.get_job("j_theirs").unwrap().unwrap().tenant, "acme");
+    let listed = |tenant: &str| {
+        s.list_jobs(&JobFilter {
+            tenant: tenant.into(),
+            limit: 10,
+            ..JobFilter::default()
+        })
+        .unwrap()
+        .into_iter()
+        .map(|j| j.id)
+        .collect::<Vec<_>>()
+    };
+    assert_eq!(listed("acme"), ["j_theirs"]);
+    assert_eq!(listed(""), ids);
+    assert!(s.delete_job("j_theirs").unwrap());
     let reports = s
         .list_jobs(&JobFilter {
             kind: Some("report".into()),

@@ -50,6 +50,8 @@ pub trait Blobs: Send + Sync {
 /// Filters and page of `GET /v1/jobs`.
 #[derive(Debug, Clone, Default)]
 pub struct JobFilter {
+    /// Only this tenant's jobs.
+    pub tenant: String,
     /// Only jobs in this state.
     pub status: Option<Status>,
     /// Only jobs of this kind.
@@ -86,11 +88,16 @@ pub trait Store: Blobs {
     /// `after` (the `(created_at, id)` of the previous page's last mesh).
     fn list_meshes(
         &self,
+        tenant: &str,
         after: Option<(i64, &str)>,
         limit: usize,
     ) -> Result<Vec<MeshRecord>, StoreError>;
     /// A stored mesh with exactly these bytes (hex SHA-256), the oldest when several.
-    fn find_mesh_by_sha256(&self, sha256: &str) -> Result<Option<MeshRecord>, StoreError>;
+    fn find_mesh_by_sha256(
+        &self,
+        tenant: &str,
+        sha256: &str,
+    ) -> Result<Option<MeshRecord>, StoreError>;
     /// Delete the meshes uploaded before `before` that no job refers to (expired uploads),
     /// each checked and deleted in one statement; their ids (their blobs are the caller's).
     fn delete_unused_meshes(&self, before: i64) -> Result<Vec<String>, StoreError>;

@@ -144,11 +144,16 @@ CREATE TRIGGER jobs_deleted AFTER DELETE ON jobs
 CREATE INDEX meshes_sha256 ON meshes(sha256);
 CREATE INDEX meshes_created ON meshes(created_at, id);",
     ),
+    (
+        6,
+        "ALTER TABLE jobs ADD COLUMN tenant TEXT NOT NULL DEFAULT '';
+ALTER TABLE meshes ADD COLUMN tenant TEXT NOT NULL DEFAULT '';",
+    ),
 ];
 
 const JOB_COLS: &str = "seq, id, kind, mesh_id, reference_mesh_id, params, callback_url, status, \
     progress, error, created_at, started_at, finished_at, expires_at, attempts, artifacts, \
-    idempotency_key, request_hash, outcome, base_url";
+    idempotency_key, request_hash, outcome, base_url, tenant";
 
 /// The channel a queued job is announced on.
 const CHANNEL: &str = "flatmesh_jobs";
@@ -218,6 +223,7 @@ fn job_from_row(r: &Row) -> Result<JobRecord, StoreError> {
         idempotency_key: r.try_get(16)?,
         request_hash: r.try_get(17)?,
         base_url: r.try_get(19)?,
+        tenant: r.try_get(20)?,
         outcome: opt_json(18, "outcome")?,
     })
 }
@@ -374,7 +380,7 @@ impl PgStore {
         let c = self.pool.get().await?;
         let st = c
             .prepare_cached(&format!(
-                "SELECT id, created_at, format, size, sha256, summary FROM meshes \
+                "SELECT id, created_at, format, size, sha256, summary, tenant FROM meshes \
                  WHERE {sql_where} {tail}"
             ))
             .await?;
@@ -390,6 +396,7 @@ impl PgStore {
                     format: r.try_get(2)?,
                     size: size as u64,
                     sha256: r.try_get(4)?,
+                    tenant: r.try_get(6)?,
                     summary: serde_json::from_str(&summary)
                         .map_err(|e| StoreError::Corrupt(format!("meshes.summary: {e}")))?,
                 })
@@ -425,8 +432,8 @@ impl Store for PgStore {
         self.run(async {
             let c = self.pool.get().await?;
             c.execute(
-                "INSERT INTO meshes (id, created_at, format, size, sha256, summary) \
-                 VALUES ($1,$2,$3,$4,$5,$6)",
+                "INSERT INTO meshes (id, created_at, format, size, sha256, summary, tenant) \
+                 VALUES ($1,$2,$3,$4,$5,$6,$7)",
                 &[
                     &m.id,
                     &m.created_at,
@@ -434,6 +441,7 @@ impl Store for PgStore {
                     &(m.size as i64),
                     &m.sha256,
                     &m.summary.to_string(),
+                    &m.tenant,
                 ],
             )
             .await?;
@@ -470,6 +478,7 @@ impl Store for PgStore {
 
     fn list_meshes(
         &self,
+        tenant: &str,
         after: Option<(i64, &str)>,
         limit: usize,
     ) -> Result<Vec<MeshRecord>, StoreError> {
@@ -477,18 +486,26 @@ impl Store for PgStore {
         let limit = limit as i64;
         self.run(async {
             self.select_meshes(
-                "($1::BIGINT IS NULL OR (created_at, id) < ($1, $2::TEXT))",
-                &[&at, &id, &limit],
+                "tenant = $4 AND ($1::BIGINT IS NULL OR (created_at, id) < ($1, $2::TEXT))",
+                &[&at, &id, &limit, &tenant],
                 "ORDER BY created_at DESC, id DESC LIMIT $3",
             )
             .await
         })
     }
 
-    fn find_mesh_by_sha256(&self, sha256: &str) -> Result<Option<MeshRecord>, StoreError> {
+    fn find_mesh_by_sha256(
+        &self,
+        tenant: &str,
+        sha256: &str,
+    ) -> Result<Option<MeshRecord>, StoreError> {
         self.run(async {
             Ok(self
-                .select_meshes("sha256 = $1", &[&sha256], "ORDER BY created_at, id LIMIT 1")
+                .select_meshes(
+                    "sha256 = $1 AND tenant = $2",
+                    &[&sha256, &tenant],
+                    "ORDER BY created_at, id LIMIT 1",
+                )
                 .await?
                 .pop())
         })
@@ -528,8 +545,9 @@ impl Store for PgStore {
                     "INSERT INTO jobs (id, kind, mesh_id, reference_mesh_id, params, \
                      callback_url, status, progress, error, created_at, started_at, \
                      finished_at, expires_at, attempts, artifacts, idempotency_key, \
-                     request_hash, outcome, base_url) \
-                     VALUES ($1,$2,$3,$4,$5,$6,$7,$8,$9,$10,$11,$12,$13,$14,$15,$16,$17,$18,$19) \
+                     request_hash, outcome, base_url, tenant) \
+                     VALUES ($1,$2,$3,$4,$5,$6,$7,$8,$9,$10,$11,$12,$13,$14,$15,$16,$17,$18,$19,\
+                     $20) \
                      ON CONFLICT (idempotency_key) DO NOTHING RETURNING seq",
                     &[
                         &j.id,
@@ -551,6 +569,7 @@ impl Store for PgStore {
                         &j.request_hash,
                         &outcome,
                         &j.base_url,
+                        &j.tenant,
                     ],
                 )
                 .await?;
@@ -665,9 +684,9 @@ impl Store for PgStore {
         let limit = f.limit as i64;
         self.run(async {
             self.select(
-                "($1::TEXT IS NULL OR status = $1) AND ($2::TEXT IS NULL OR kind = $2) \
-                 AND ($3::BIGINT IS NULL OR seq < $3)",
-                &[&status, &f.kind, &f.before_seq, &limit],
+                "tenant = $5 AND ($1::TEXT IS NULL OR status = $1) \
+                 AND ($2::TEXT IS NULL OR kind = $2) AND ($3::BIGINT IS NULL OR seq < $3)",
+                &[&status, &f.kind, &f.before_seq, &limit, &f.tenant],
                 "ORDER BY seq DESC LIMIT $4",
             )
             .await

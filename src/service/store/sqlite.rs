@@ -83,7 +83,7 @@ CREATE INDEX IF NOT EXISTS meshes_created ON meshes(created_at, id);
 
 const JOB_COLS: &str = "seq, id, kind, mesh_id, reference_mesh_id, params, callback_url, status, \
     progress, error, created_at, started_at, finished_at, expires_at, attempts, artifacts, \
-    idempotency_key, request_hash, outcome, base_url";
+    idempotency_key, request_hash, outcome, base_url, tenant";
 
 fn json_err(e: serde_json::Error) -> rusqlite::Error {
     rusqlite::Error::ToSqlConversionFailure(Box::new(e))
@@ -129,6 +129,7 @@ fn job_from_row(r: &rusqlite::Row<'_>) -> rusqlite::Result<JobRecord> {
         idempotency_key: r.get(16)?,
         request_hash: r.get(17)?,
         base_url: r.get(19)?,
+        tenant: r.get(20)?,
         outcome: outcome
             .map(|p| serde_json::from_str(&p))
             .transpose()
@@ -140,21 +141,26 @@ fn job_from_row(r: &rusqlite::Row<'_>) -> rusqlite::Result<JobRecord> {
 /// outcome, and the lease of the coordination contract (a running job without a lease counts
 /// as expired, so it is queued again).
 fn add_columns(conn: &Connection) -> rusqlite::Result<()> {
-    for (name, decl) in [
-        ("outcome", "outcome TEXT"),
-        ("base_url", "base_url TEXT"),
-        ("worker", "worker TEXT"),
-        ("lease_until", "lease_until INTEGER"),
+    for (table, name, decl) in [
+        ("jobs", "outcome", "outcome TEXT"),
+        ("jobs", "base_url", "base_url TEXT"),
+        ("jobs", "worker", "worker TEXT"),
+        ("jobs", "lease_until", "lease_until INTEGER"),
         (
+            "jobs",
             "cancel_requested",
             "cancel_requested INTEGER NOT NULL DEFAULT 0",
         ),
+        ("jobs", "tenant", "tenant TEXT NOT NULL DEFAULT ''"),
+        ("meshes", "tenant", "tenant TEXT NOT NULL DEFAULT ''"),
     ] {
         let has: bool = conn
-            .prepare("SELECT 1 FROM pragma_table_info('jobs') WHERE name = ?1")?
+            .prepare(&format!(
+                "SELECT 1 FROM pragma_table_info('{table}') WHERE name = ?1"
+            ))?
             .exists([name])?;
         if !has {
-            conn.execute_batch(&format!("ALTER TABLE jobs ADD COLUMN {decl}"))?;
+            conn.execute_batch(&format!("ALTER TABLE {table} ADD COLUMN {decl}"))?;
         }
     }
     Ok(())
@@ -170,7 +176,7 @@ impl SqliteStore {
     ) -> Result<Vec<MeshRecord>, StoreError> {
         let c = self.reader();
         let mut st = c.prepare_cached(&format!(
-            "SELECT id, created_at, format, size, sha256, summary FROM meshes \
+            "SELECT id, created_at, format, size, sha256, summary, tenant FROM meshes \
              WHERE {sql_where} {tail}"
         ))?;
         let rows = st
@@ -182,17 +188,19 @@ impl SqliteStore {
                     r.get::<_, i64>(3)? as u64,
                     r.get::<_, String>(4)?,
                     r.get::<_, String>(5)?,
+                    r.get::<_, String>(6)?,
                 ))
             })?
             .collect::<rusqlite::Result<Vec<_>>>()?;
         rows.into_iter()
-            .map(|(id, created_at, format, size, sha256, summary)| {
+            .map(|(id, created_at, format, size, sha256, summary, tenant)| {
                 Ok(MeshRecord {
                     id,
                     created_at,
                     format,
                     size,
                     sha256,
+                    tenant,
                     summary: serde_json::from_str(&summary)
                         .map_err(|e| StoreError::Corrupt(e.to_string()))?,
                 })
@@ -298,8 +306,17 @@ impl Store for SqliteStore {
 
     fn insert_mesh(&self, m: &MeshRecord) -> Result<(), StoreError> {
         self.conn().execute(
-            "INSERT INTO meshes (id, created_at, format, size, sha256, summary) VALUES (?1,?2,?3,?4,?5,?6)",
-            params![m.id, m.created_at, m.format, m.size as i64, m.sha256, m.summary.to_string()],
+            "INSERT INTO meshes (id, created_at, format, size, sha256, summary, tenant) \
+             VALUES (?1,?2,?3,?4,?5,?6,?7)",
+            params![
+                m.id,
+                m.created_at,
+                m.format,
+                m.size as i64,
+                m.sha256,
+                m.summary.to_string(),
+                m.tenant
+            ],
         )?;
         Ok(())
     }
@@ -329,22 +346,27 @@ impl Store for SqliteStore {
 
     fn list_meshes(
         &self,
+        tenant: &str,
         after: Option<(i64, &str)>,
         limit: usize,
     ) -> Result<Vec<MeshRecord>, StoreError> {
         let (at, id) = (after.map(|a| a.0), after.map(|a| a.1));
         self.select_meshes(
-            "(?1 IS NULL OR (created_at, id) < (?1, ?2))",
-            &[&at, &id, &(limit as i64)],
+            "tenant = ?4 AND (?1 IS NULL OR (created_at, id) < (?1, ?2))",
+            &[&at, &id, &(limit as i64), &tenant],
             "ORDER BY created_at DESC, id DESC LIMIT ?3",
         )
     }
 
-    fn find_mesh_by_sha256(&self, sha256: &str) -> Result<Option<MeshRecord>, StoreError> {
+    fn find_mesh_by_sha256(
+        &self,
+        tenant: &str,
+        sha256: &str,
+    ) -> Result<Option<MeshRecord>, StoreError> {
         Ok(self
             .select_meshes(
-                "sha256 = ?1",
-                &[&sha256 as &dyn rusqlite::ToSql],
+                "sha256 = ?1 AND tenant = ?2",
+                &[&sha256 as &dyn rusqlite::ToSql, &tenant],
                 "ORDER BY created_at, id LIMIT 1",
             )?
             .pop())
@@ -381,8 +403,8 @@ impl Store for SqliteStore {
         tx.execute(
             "INSERT INTO jobs (id, kind, mesh_id, reference_mesh_id, params, callback_url, status, \
              progress, error, created_at, started_at, finished_at, expires_at, attempts, artifacts, \
-             idempotency_key, request_hash, outcome, base_url) \
-             VALUES (?1,?2,?3,?4,?5,?6,?7,?8,?9,?10,?11,?12,?13,?14,?15,?16,?17,?18,?19)",
+             idempotency_key, request_hash, outcome, base_url, tenant) \
+             VALUES (?1,?2,?3,?4,?5,?6,?7,?8,?9,?10,?11,?12,?13,?14,?15,?16,?17,?18,?19,?20)",
             params![
                 j.id,
                 j.kind,
@@ -403,6 +425,7 @@ impl Store for SqliteStore {
                 j.request_hash,
                 j.outcome.as_ref().map(|p| p.to_string()),
                 j.base_url,
+                j.tenant,
             ],
         )?;
         let seq = tx.last_insert_rowid();
@@ -459,8 +482,9 @@ impl Store for SqliteStore {
         let status = f.status.map(|s| s.as_str());
         let limit = f.limit as i64;
         self.select_jobs(
-            "(?1 IS NULL OR status = ?1) AND (?2 IS NULL OR kind = ?2) AND (?3 IS NULL OR seq < ?3)",
-            &[&status, &f.kind, &f.before_seq, &limit],
+            "tenant = ?5 AND (?1 IS NULL OR status = ?1) AND (?2 IS NULL OR kind = ?2) \
+             AND (?3 IS NULL OR seq < ?3)",
+            &[&status, &f.kind, &f.before_seq, &limit, &f.tenant],
             "ORDER BY seq DESC LIMIT ?4",
         )
     }
