@@ -104,6 +104,7 @@ fn kinds_help() -> String {
 
 fn main() -> ExitCode {
     use clap::{CommandFactory, FromArgMatches};
+    flatmesh::io::install_quiet_panic_hook();
     let cmd = Cli::command().mut_subcommand("run", |c| c.after_long_help(kinds_help()));
     let cli = match Cli::from_arg_matches(&cmd.get_matches()) {
         Ok(c) => c,

@@ -646,3 +646,133 @@ async fn tenants_see_only_their_own() {
         .unwrap();
     assert_eq!(r.status(), 200);
 }
+
+/// A glTF document the third-party parser panics on: one line on stderr naming what the
+/// parser hit, nothing of the panic.
+#[test]
+fn a_gltf_parser_panic_is_one_line() {
+    let dir = tmp("hostile-gltf-panic");
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("bad.gltf");
+    std::fs::write(
+        &file,
+        r#"{"asset":{"version":"2.0"},"meshes":[{"primitives":[{"attributes":{"POSITION":99}}]}],"nodes":[{"mesh":0}],"scenes":[{"nodes":[0]}]}"#,
+    )
+    .unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_flatmesh"))
+        .arg("report")
+        .arg(&file)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("index out of bounds") && !err.contains("panicked"),
+        "{err}"
+    );
+}
+
+/// Small items of the issue: a compressed request body is refused (415), a huge echoed
+/// value is quoted only in part, a body that cannot be read is a 400 (not a 413), and
+/// coordinates far out of range are refused by name while a mesh scaled by 1e±20 measures
+/// exactly as the unscaled one.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn small_hostile_items() {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let s = Server::start(&tmp("hostile-small"), &[]);
+    let c = client();
+    let r = c
+        .post(s.url("/v1/meshes"))
+        .header("content-type", "model/obj")
+        .header("content-encoding", "gzip")
+        .body(fixture("cone"))
+        .send()
+        .await
+        .unwrap();
+    let p = problem(r, 415).await;
+    assert!(p["detail"].as_str().unwrap().contains("gzip"), "{p}");
+
+    let huge = "k".repeat(1 << 20);
+    let m = upload(&c, &s, fixture("cone")).await;
+    let r = c
+        .post(s.url("/v1/jobs"))
+        .json(&json!({"kind": huge, "mesh_id": m["id"]}))
+        .send()
+        .await
+        .unwrap();
+    let text = r.text().await.unwrap();
+    assert!(text.len() < 4000, "{} bytes answered", text.len());
+    let r = c
+        .post(s.url("/v1/jobs"))
+        .json(&json!({huge.clone(): 1, "kind": "report", "mesh_id": m["id"]}))
+        .send()
+        .await
+        .unwrap();
+    let p = problem(r, 422).await;
+    assert!(
+        p["field"].as_str().unwrap().len() <= 210,
+        "field echoed whole"
+    );
+
+    // A chunked body with a malformed chunk: the body cannot be read.
+    let addr = s.base.strip_prefix("http://").unwrap();
+    let mut tcp = tokio::net::TcpStream::connect(addr).await.unwrap();
+    tcp.write_all(
+        b"POST /v1/jobs HTTP/1.1\r\nhost: x\r\ncontent-type: application/json\r\n\
+          transfer-encoding: chunked\r\n\r\nzz\r\n{}\r\n0\r\n\r\n",
+    )
+    .await
+    .unwrap();
+    let mut answer = vec![0u8; 4096];
+    let n = tokio::time::timeout(Duration::from_secs(10), tcp.read(&mut answer))
+        .await
+        .unwrap()
+        .unwrap();
+    let answer = String::from_utf8_lossy(&answer[..n]).to_string();
+    assert!(answer.starts_with("HTTP/1.1 400"), "{answer}");
+
+    let (cone, _) = flatmesh::io::load(&fixture("cone"), flatmesh::io::Format::Obj).unwrap();
+    let scaled = |k: f64| {
+        let mut obj = String::new();
+        for p in cone.positions() {
+            obj += &format!("v {:e} {:e} {:e}\n", p[0] * k, p[1] * k, p[2] * k);
+        }
+        for t in cone.triangles() {
+            obj += &format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1);
+        }
+        obj.into_bytes()
+    };
+    let base = m["max_flattenability"].as_f64().unwrap();
+    for k in [1e20, 1e-20] {
+        let r = c
+            .post(s.url("/v1/meshes"))
+            .header("content-type", "model/obj")
+            .body(scaled(k))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 201, "scale {k}");
+        let w = json_of(r, "Mesh").await["max_flattenability"]
+            .as_f64()
+            .unwrap();
+        assert!(
+            (w - base).abs() <= 1e-12 + 1e-9 * base,
+            "scale {k}: ϖ {w} vs {base}"
+        );
+    }
+    for (k, needle) in [(1e35, "beyond"), (1e-35, "across"), (1e-300, "across")] {
+        let r = c
+            .post(s.url("/v1/meshes"))
+            .header("content-type", "model/obj")
+            .body(scaled(k))
+            .send()
+            .await
+            .unwrap();
+        let p = problem(r, 422).await;
+        assert!(
+            p["detail"].as_str().unwrap().contains(needle),
+            "scale {k}: {p}"
+        );
+    }
+}

@@ -69,7 +69,8 @@ fn write_old_index(dir: &std::path::Path, running: &str, queued: &str) {
         c.execute("ATTACH ?1 AS cur", [db.to_str().unwrap()])
             .unwrap();
         c.execute_batch(&format!(
-            "INSERT INTO main.meshes SELECT * FROM cur.meshes;
+            "INSERT INTO main.meshes SELECT id, created_at, format, size, sha256, summary \
+             FROM cur.meshes;
              INSERT INTO main.jobs ({OLD_JOB_COLS}) SELECT {OLD_JOB_COLS} FROM cur.jobs;"
         ))
         .unwrap();

@@ -62,11 +62,15 @@ pub fn read_limited(
     bytes: &[u8],
     limits: &super::Limits,
 ) -> Result<(RawMesh, Vec<Warning>), ReadError> {
-    let parsed = std::panic::catch_unwind(|| gltf::Gltf::from_slice(bytes));
+    let parsed = super::quietly(|| gltf::Gltf::from_slice(bytes));
     let doc = match parsed {
         Ok(Ok(doc)) => doc,
         Ok(Err(e)) => return Err(err(describe_gltf_error(&e))),
-        Err(_) => return Err(err("malformed document (the glTF parser rejected it)")),
+        Err(why) => {
+            return Err(err(format!(
+                "malformed document (the glTF parser failed on it: {why})"
+            )))
+        }
     };
     let decoded = resolve_buffers(&doc)?;
     let blob = doc.blob.as_deref().unwrap_or_default();

@@ -30,6 +30,38 @@ impl Default for Limits {
     }
 }
 
+thread_local! {
+    /// Set while [`quietly`] runs: the hook of [`install_quiet_panic_hook`] stays silent.
+    static QUIET: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Run `f`, turning a panic into `Err(its message)`. A third-party parser may panic on
+/// hostile input; the caller reports that as an error of the input, and (with
+/// [`install_quiet_panic_hook`]) nothing is printed for it.
+pub fn quietly<T>(f: impl FnOnce() -> T) -> Result<T, String> {
+    QUIET.with(|q| q.set(true));
+    let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
+    QUIET.with(|q| q.set(false));
+    r.map_err(|payload| {
+        payload
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| payload.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "no message".into())
+    })
+}
+
+/// Keep the process's panic hook, except for panics inside [`quietly`], which are reported
+/// as errors of the input instead (the command line prints one line per failure).
+pub fn install_quiet_panic_hook() {
+    let previous = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        if !QUIET.with(|q| q.get()) {
+            previous(info);
+        }
+    }));
+}
+
 /// Names (patches, objects, groups) longer than this many bytes are cut, with a warning.
 pub const MAX_NAME_BYTES: usize = 256;
 

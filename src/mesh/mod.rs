@@ -126,6 +126,28 @@ pub enum MeshError {
         /// The value.
         value: f64,
     },
+    /// A coordinate too large to measure or to write (glTF stores f32).
+    #[error(
+        "vertex {vertex} has {axis} = {value:e}, beyond ±{MAX_COORDINATE:e}: lengths could \
+         not be measured in f64 nor written to glTF (f32); rescale the mesh"
+    )]
+    OutOfRange {
+        /// Vertex index.
+        vertex: usize,
+        /// `x`, `y` or `z`.
+        axis: char,
+        /// The value.
+        value: f64,
+    },
+    /// The whole mesh is too small for its angles and areas to be measured.
+    #[error(
+        "the mesh is {diagonal:e} across (bounding-box diagonal), below {MIN_EXTENT:e}: its \
+         areas and angles cannot be measured in f64; rescale it"
+    )]
+    TooSmall {
+        /// Bounding-box diagonal.
+        diagonal: f64,
+    },
     /// A triangle has a repeated vertex or (numerically) zero area.
     #[error("face {face} (vertices {} {} {}) is degenerate: {reason}", .vertices[0], .vertices[1], .vertices[2])]
     DegenerateFace {
@@ -440,17 +462,37 @@ pub fn bbox_of(points: impl Iterator<Item = [f64; 3]>) -> ([f64; 3], [f64; 3]) {
     (lo, hi)
 }
 
+/// Largest coordinate magnitude accepted: squared lengths stay far inside f64 and positions
+/// inside f32 (glTF output).
+pub const MAX_COORDINATE: f64 = 1e30;
+/// Smallest bounding-box diagonal accepted: products of lengths (areas, squared lengths) stay
+/// far above f64's underflow.
+pub const MIN_EXTENT: f64 = 1e-30;
+
 fn check_finite(positions: &[[f64; 3]]) -> Result<(), MeshError> {
     for (i, p) in positions.iter().enumerate() {
         for (k, &x) in p.iter().enumerate() {
+            let axis = ['x', 'y', 'z'][k];
             if !x.is_finite() {
                 return Err(MeshError::NonFinite {
                     vertex: i,
-                    axis: ['x', 'y', 'z'][k],
+                    axis,
+                    value: x,
+                });
+            }
+            if x.abs() > MAX_COORDINATE {
+                return Err(MeshError::OutOfRange {
+                    vertex: i,
+                    axis,
                     value: x,
                 });
             }
         }
+    }
+    let (lo, hi) = bbox_of(positions.iter().copied());
+    let diagonal = (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f64>().sqrt();
+    if !positions.is_empty() && diagonal < MIN_EXTENT {
+        return Err(MeshError::TooSmall { diagonal });
     }
     Ok(())
 }

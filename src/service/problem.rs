@@ -100,8 +100,14 @@ impl Problem {
 }
 
 impl IntoResponse for Problem {
-    fn into_response(self) -> Response {
+    fn into_response(mut self) -> Response {
         let status = self.status_code();
+        // Details quote what the client sent (a kind, a member name, an id): a bounded
+        // quote, never a 50 MB echo.
+        cap(&mut self.detail, MAX_DETAIL);
+        if let Some(f) = &mut self.field {
+            cap(f, MAX_FIELD);
+        }
         let body = serde_json::to_vec(&self).unwrap_or_default();
         let mut res = (status, body).into_response();
         let h = res.headers_mut();
@@ -114,6 +120,24 @@ impl IntoResponse for Problem {
         }
         res
     }
+}
+
+/// Longest `detail` sent, in bytes.
+const MAX_DETAIL: usize = 2000;
+/// Longest `field` sent, in bytes.
+const MAX_FIELD: usize = 200;
+
+/// Cut `s` to at most `max` bytes (on a character boundary), marking the cut with `…`.
+fn cap(s: &mut String, max: usize) {
+    if s.len() <= max {
+        return;
+    }
+    let mut end = max;
+    while !s.is_char_boundary(end) {
+        end -= 1;
+    }
+    s.truncate(end);
+    s.push('…');
 }
 
 impl From<StoreError> for Problem {

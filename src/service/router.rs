@@ -158,6 +158,24 @@ async fn problem_layer(st: axum::extract::State<AppState>, req: Request, next: N
 }
 
 /// Bearer API keys on /v1 (when configured).
+/// Request bodies are read as sent: a compressed one (`Content-Encoding` other than
+/// `identity`) would otherwise be parsed as if it were not, so it is refused with 415.
+async fn refuse_encoded_bodies(req: Request, next: Next) -> Response {
+    let encoding = req.headers().get(header::CONTENT_ENCODING).map(|v| {
+        String::from_utf8_lossy(v.as_bytes())
+            .trim()
+            .to_ascii_lowercase()
+    });
+    match encoding {
+        Some(e) if !e.is_empty() && e != "identity" => Problem::unsupported_media(format!(
+            "Content-Encoding `{e}`: request bodies are not decompressed here; send them \
+             uncompressed"
+        ))
+        .into_response(),
+        _ => next.run(req).await,
+    }
+}
+
 async fn auth_layer(st: axum::extract::State<AppState>, mut req: Request, next: Next) -> Response {
     if st.api_keys.is_empty() {
         req.extensions_mut().insert(Tenant::default());
@@ -211,7 +229,9 @@ pub fn router(st: AppState, cfg: &Config) -> Router {
             open = open.route(r.path, r.handler);
         }
     }
-    let keyed = keyed.route_layer(middleware::from_fn_with_state(st.clone(), auth_layer));
+    let keyed = keyed
+        .route_layer(middleware::from_fn(refuse_encoded_bodies))
+        .route_layer(middleware::from_fn_with_state(st.clone(), auth_layer));
     let mut app = open
         .merge(keyed)
         .layer(DefaultBodyLimit::max(cfg.max_upload))

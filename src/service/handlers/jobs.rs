@@ -2,7 +2,7 @@
 
 use super::{blocking, hex, hv, media_type, mesh_part, multipart_err, new_id, sha256_hex};
 use super::{etag_matches, get_mesh_rec, json_with_etag, page_size, page_token, request_base};
-use super::{store_mesh, ApiResult};
+use super::{read_body, store_mesh, ApiResult};
 use crate::algorithms::AlgoError;
 use crate::io;
 use crate::jobs::{JobSpec, Kind, SpecError};
@@ -220,15 +220,7 @@ async fn read_json_submit(
     tenant: &Tenant,
     request: axum::extract::Request,
 ) -> Result<Request, Problem> {
-    let body = axum::body::to_bytes(request.into_body(), st.max_upload)
-        .await
-        .map_err(|_| {
-            Problem::new(
-                StatusCode::PAYLOAD_TOO_LARGE,
-                "payload-too-large",
-                "body too large",
-            )
-        })?;
+    let body = read_body(request.into_body(), st.max_upload).await?;
     let submit = parse_submit(&body, false)?;
     validate_submit(st, &submit, Some(submit.reference_mesh_id.is_some()))?;
     let mut hasher = Sha256::new();

@@ -2,7 +2,7 @@
 
 use super::{
     blocking, format_of, get_mesh_rec, hv, json_with_etag, media_type, mesh_part, multipart_err,
-    page_size, page_token, request_base, store_mesh,
+    page_size, page_token, read_body, request_base, store_mesh,
 };
 use super::{ApiResult, MESH_TYPES};
 use crate::io;
@@ -49,15 +49,7 @@ pub async fn upload_mesh(
         }
         rec.ok_or_else(|| Problem::invalid("mesh", "the multipart body has no `mesh` part"))?
     } else {
-        let bytes = axum::body::to_bytes(request.into_body(), st.max_upload)
-            .await
-            .map_err(|_| {
-                Problem::new(
-                    StatusCode::PAYLOAD_TOO_LARGE,
-                    "payload-too-large",
-                    format!("the body exceeds {} bytes", st.max_upload),
-                )
-            })?;
+        let bytes = read_body(request.into_body(), st.max_upload).await?;
         let sniffed = matches!(
             media.as_str(),
             "" | "application/octet-stream" | "text/plain"

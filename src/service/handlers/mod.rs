@@ -141,6 +141,25 @@ async fn store_mesh(
     Ok((rec, true))
 }
 
+/// A whole request body of at most `limit` bytes: 413 past the limit, 400 when it could not
+/// be read (the client stopped sending, a malformed chunked encoding).
+async fn read_body(body: axum::body::Body, limit: usize) -> Result<Bytes, Problem> {
+    axum::body::to_bytes(body, limit).await.map_err(|e| {
+        let mut cause: Option<&(dyn std::error::Error + 'static)> = Some(&e);
+        while let Some(c) = cause {
+            if c.is::<http_body_util::LengthLimitError>() {
+                return Problem::new(
+                    axum::http::StatusCode::PAYLOAD_TOO_LARGE,
+                    "payload-too-large",
+                    format!("the body exceeds {limit} bytes (the server's --max-upload)"),
+                );
+            }
+            cause = c.source();
+        }
+        Problem::bad_request(format!("the body could not be read: {e}"))
+    })
+}
+
 fn multipart_err(e: axum::extract::multipart::MultipartError) -> Problem {
     let status = e.status();
     Problem::new(status, problem::slug_for(status), e.body_text())
