@@ -776,3 +776,32 @@ async fn small_hostile_items() {
         );
     }
 }
+
+/// Two 100k-triangle fans sharing one vertex (a bow-tie): refused naming the vertex and its
+/// fans (counted by hash, not by scanning the vertex's 200k half-edges for each; the time is
+/// in the issue note, not asserted here).
+#[test]
+fn a_huge_bow_tie_is_named() {
+    let n = 100_000usize;
+    let mut obj = String::from("v 0 0 0\n");
+    for side in [1.0f64, -1.0] {
+        for k in 0..=n {
+            let a = std::f64::consts::PI * k as f64 / n as f64;
+            let z = if side > 0.0 { 0.0 } else { 1.0 };
+            obj += &format!("v {:.9} {:.9} {z}\n", a.cos(), side * a.sin());
+        }
+    }
+    for k in 1..=n {
+        obj += &format!("f 1 {} {}\n", k + 1, k + 2);
+    }
+    let base = n + 2;
+    for k in 1..=n {
+        obj += &format!("f 1 {} {}\n", base + k + 1, base + k);
+    }
+    let err = flatmesh::io::load(obj.as_bytes(), flatmesh::io::Format::Obj).unwrap_err();
+    assert!(
+        err.to_string()
+            .contains("non-manifold vertex 0: its faces form 2 separate fans"),
+        "{err}"
+    );
+}

@@ -551,7 +551,10 @@ fn count_fans(outs: &[u32], twin: &[u32]) -> usize {
     // Fans are chains of outgoing half-edges linked by twin(prev(h)); count chain starts
     // (open fans) and closed cycles.
     let mut seen = vec![false; outs.len()];
-    let pos = |h: u32| outs.iter().position(|&x| x == h);
+    // By hash, not by scanning: a vertex of a hostile file can have 10⁵ faces.
+    let index: std::collections::HashMap<u32, usize> =
+        outs.iter().enumerate().map(|(k, &h)| (h, k)).collect();
+    let pos = |h: u32| index.get(&h).copied();
     let mut fans = 0;
     for s in 0..outs.len() {
         if seen[s] {
