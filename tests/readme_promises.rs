@@ -166,32 +166,7 @@ fn client_synopsis_is_client_help() {
 /// Relative error of the pattern's edge lengths against the mesh's, after the one scale
 /// factor between the mesh's unit and the drawing's (the median ratio).
 fn pattern_edge_error(pat: &Value, mesh: &flatmesh::mesh::Mesh) -> f64 {
-    let pos = mesh.positions();
-    let mut pairs = Vec::new();
-    for piece in pat["pieces"].as_array().unwrap() {
-        let vid: Vec<usize> = piece["vertex_ids"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|v| v.as_u64().unwrap() as usize)
-            .collect();
-        let uv: Vec<[f64; 2]> = piece["uv"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|p| [p[0].as_f64().unwrap(), p[1].as_f64().unwrap()])
-            .collect();
-        for t in piece["triangles"].as_array().unwrap() {
-            for k in 0..3 {
-                let a = t[k].as_u64().unwrap() as usize;
-                let b = t[(k + 1) % 3].as_u64().unwrap() as usize;
-                let d2 = ((uv[a][0] - uv[b][0]).powi(2) + (uv[a][1] - uv[b][1]).powi(2)).sqrt();
-                let (p, q) = (pos[vid[a]], pos[vid[b]]);
-                let d3 = (0..3).map(|i| (p[i] - q[i]).powi(2)).sum::<f64>().sqrt();
-                pairs.push((d2, d3));
-            }
-        }
-    }
+    let pairs = pattern_edges(pat, mesh.positions());
     assert!(!pairs.is_empty(), "no pattern edges");
     let mut ratios: Vec<f64> = pairs.iter().map(|(a, b)| a / b).collect();
     ratios.sort_by(f64::total_cmp);
@@ -237,16 +212,7 @@ async fn patterns_of_kinds_that_change_the_mesh() {
     let c = client();
     let cone = upload(&c, &s, fixture("cone_noisy")).await;
     let cylinder = upload(&c, &s, fixture("cylinder_noisy")).await;
-    // perturb's body: the noiseless cylinder pulled towards its axis.
-    let (cyl, _) = flatmesh::io::load(&fixture("cylinder"), flatmesh::io::Format::Obj).unwrap();
-    let mut body = String::new();
-    for p in cyl.positions() {
-        body += &format!("v {} {} {}\n", 0.9 * p[0], 0.9 * p[1], p[2]);
-    }
-    for t in cyl.triangles() {
-        body += &format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1);
-    }
-    let body = upload(&c, &s, body.into_bytes()).await;
+    let body = upload(&c, &s, shrunk_cylinder_obj()).await;
     let requests = [
         json!({"kind": "subdivide", "mesh_id": cone["id"]}),
         json!({"kind": "develop", "mesh_id": cone["id"], "params": {"method": "loop"}}),
@@ -597,16 +563,8 @@ async fn client_inputs_as_ids_or_files() {
     let c = client();
     let dir = tmp("promise-client-inputs-files");
     std::fs::create_dir_all(&dir).unwrap();
-    let (cyl, _) = flatmesh::io::load(&fixture("cylinder"), flatmesh::io::Format::Obj).unwrap();
-    let mut body = String::new();
-    for p in cyl.positions() {
-        body += &format!("v {} {} {}\n", 0.9 * p[0], 0.9 * p[1], p[2]);
-    }
-    for t in cyl.triangles() {
-        body += &format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1);
-    }
     let body_file = dir.join("body.obj");
-    std::fs::write(&body_file, body).unwrap();
+    std::fs::write(&body_file, shrunk_cylinder_obj()).unwrap();
     let body_file = body_file.to_str().unwrap();
     let garment = "fixtures/cylinder_noisy.obj";
     let server = [("FLATMESH_SERVER", s.base.as_str())];
@@ -755,8 +713,8 @@ async fn worker_threads_run_at_the_nice_value() {
         let n: i32 = rest.split_whitespace().nth(16).unwrap().parse().unwrap();
         nice.insert(comm.trim().to_string(), n);
     }
-    // Relative to the nice value this test runs at (the server inherits it; an unprivileged
-    // process cannot go below it).
+    // Relative to the nice value this test runs at (the server inherits it; only a
+    // privileged process can go below it).
     let own = std::fs::read_to_string("/proc/self/stat").unwrap();
     let own: i32 = own
         .rsplit_once(") ")
@@ -767,7 +725,12 @@ async fn worker_threads_run_at_the_nice_value() {
         .unwrap()
         .parse()
         .unwrap();
-    assert_eq!(nice.get("flatmesh-worker"), Some(&own.max(7)), "{nice:?}");
+    let worker = nice.get("flatmesh-worker").copied();
+    let allowed = if own <= 7 { vec![7] } else { vec![7, own] };
+    assert!(
+        worker.is_some_and(|w| allowed.contains(&w)),
+        "{nice:?} (this process at {own})"
+    );
     assert_eq!(nice.get("flatmesh-http"), Some(&own), "{nice:?}");
     c.post(s.url(&format!("/v1/jobs/{id}/cancel")))
         .send()

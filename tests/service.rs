@@ -543,35 +543,11 @@ async fn flatten_job_end_to_end() {
         .await
         .unwrap();
     let pat = json_of(r, "Patterns").await;
-    let pos = cmesh.positions();
-    let mut edges = 0;
-    for piece in pat["pieces"].as_array().unwrap() {
-        let vid: Vec<usize> = piece["vertex_ids"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|v| v.as_u64().unwrap() as usize)
-            .collect();
-        let uv: Vec<[f64; 2]> = piece["uv"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|p| [p[0].as_f64().unwrap(), p[1].as_f64().unwrap()])
-            .collect();
-        for t in piece["triangles"].as_array().unwrap() {
-            for k in 0..3 {
-                let a = t[k].as_u64().unwrap() as usize;
-                let b = t[(k + 1) % 3].as_u64().unwrap() as usize;
-                let l2 = ((uv[a][0] - uv[b][0]).powi(2) + (uv[a][1] - uv[b][1]).powi(2)).sqrt();
-                let (p, q) = (pos[vid[a]], pos[vid[b]]);
-                let l3 =
-                    ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt();
-                assert!((l2 - l3).abs() < 1e-6 * l3.max(1.0), "edge {l2} vs {l3}");
-                edges += 1;
-            }
-        }
+    let edges = pattern_edges(&pat, cmesh.positions());
+    for &(l2, l3) in &edges {
+        assert!((l2 - l3).abs() < 1e-6 * l3.max(1.0), "edge {l2} vs {l3}");
     }
-    assert_eq!(edges, 3 * cmesh.triangles().len());
+    assert_eq!(edges.len(), 3 * cmesh.triangles().len());
     for (f, media, head) in [
         ("svg", "image/svg+xml", "<?xml"),
         ("dxf", "image/vnd.dxf", "0"),
@@ -673,30 +649,10 @@ async fn fl_mesh_job_end_to_end() {
         "Patterns",
     )
     .await;
-    let pos = out.positions();
-    let mut worst_rel = 0.0f64;
-    for piece in pat["pieces"].as_array().unwrap() {
-        let vid: Vec<usize> = piece["vertex_ids"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|v| v.as_u64().unwrap() as usize)
-            .collect();
-        let uv = piece["uv"].as_array().unwrap();
-        for t in piece["triangles"].as_array().unwrap() {
-            for k in 0..3 {
-                let a = t[k].as_u64().unwrap() as usize;
-                let b = t[(k + 1) % 3].as_u64().unwrap() as usize;
-                let d2 = (0..2)
-                    .map(|i| (uv[a][i].as_f64().unwrap() - uv[b][i].as_f64().unwrap()).powi(2))
-                    .sum::<f64>()
-                    .sqrt();
-                let (p, q) = (pos[vid[a]], pos[vid[b]]);
-                let d3 = (0..3).map(|i| (p[i] - q[i]).powi(2)).sum::<f64>().sqrt();
-                worst_rel = worst_rel.max((d2 - d3).abs() / d3);
-            }
-        }
-    }
+    let worst_rel = pattern_edges(&pat, out.positions())
+        .iter()
+        .map(|(d2, d3)| (d2 - d3).abs() / d3)
+        .fold(0.0f64, f64::max);
     assert!(
         worst_rel < 1e-4,
         "pattern of the fl-mesh output: edge error {worst_rel}"
@@ -738,17 +694,7 @@ async fn perturb_job_end_to_end() {
     let c = client();
     let garment = fixture("cylinder_noisy");
     let (gmesh, _) = flatmesh::io::load(&garment, flatmesh::io::Format::Obj).unwrap();
-    // The body: the noiseless cylinder shrunk towards its axis (x, y by 0.9), closed by the
-    // input's own open ends being irrelevant: an open body is accepted with a warning.
-    let (cyl, _) = flatmesh::io::load(&fixture("cylinder"), flatmesh::io::Format::Obj).unwrap();
-    let mut obj = String::new();
-    for p in cyl.positions() {
-        obj += &format!("v {} {} {}\n", 0.9 * p[0], 0.9 * p[1], p[2]);
-    }
-    for t in cyl.triangles() {
-        obj += &format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1);
-    }
-    let body_bytes = obj.into_bytes();
+    let body_bytes = shrunk_cylinder_obj();
     let form = reqwest::multipart::Form::new()
         .part(
             "job",

@@ -246,6 +246,51 @@ pub async fn job(c: &reqwest::Client, s: &Server, id: &str) -> Value {
     json_of(r, "Job").await
 }
 
+/// A reference body for `perturb` around the `cylinder_noisy` fixture: the noiseless
+/// cylinder pulled towards its axis (x, y by 0.9), as OBJ (open: accepted with a warning).
+pub fn shrunk_cylinder_obj() -> Vec<u8> {
+    let (cyl, _) = flatmesh::io::load(&fixture("cylinder"), flatmesh::io::Format::Obj).unwrap();
+    let mut obj = String::new();
+    for p in cyl.positions() {
+        obj += &format!("v {} {} {}\n", 0.9 * p[0], 0.9 * p[1], p[2]);
+    }
+    for t in cyl.triangles() {
+        obj += &format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1);
+    }
+    obj.into_bytes()
+}
+
+/// Every triangle edge of a `Patterns` JSON: (its length in the drawing, the length of the
+/// same edge on the 3D mesh whose `positions` the pieces' `vertex_ids` index).
+pub fn pattern_edges(pat: &Value, positions: &[[f64; 3]]) -> Vec<(f64, f64)> {
+    let mut out = Vec::new();
+    for piece in pat["pieces"].as_array().unwrap() {
+        let vid: Vec<usize> = piece["vertex_ids"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_u64().unwrap() as usize)
+            .collect();
+        let uv: Vec<[f64; 2]> = piece["uv"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| [p[0].as_f64().unwrap(), p[1].as_f64().unwrap()])
+            .collect();
+        for t in piece["triangles"].as_array().unwrap() {
+            for k in 0..3 {
+                let a = t[k].as_u64().unwrap() as usize;
+                let b = t[(k + 1) % 3].as_u64().unwrap() as usize;
+                let d2 = ((uv[a][0] - uv[b][0]).powi(2) + (uv[a][1] - uv[b][1]).powi(2)).sqrt();
+                let (p, q) = (positions[vid[a]], positions[vid[b]]);
+                let d3 = (0..3).map(|i| (p[i] - q[i]).powi(2)).sum::<f64>().sqrt();
+                out.push((d2, d3));
+            }
+        }
+    }
+    out
+}
+
 pub async fn wait_for(c: &reqwest::Client, s: &Server, id: &str, want: &[&str]) -> Value {
     let start = Instant::now();
     loop {

@@ -2,7 +2,7 @@
 
 use super::{
     blocking, format_of, get_mesh_rec, hv, json_with_etag, media_type, mesh_part, multipart_err,
-    page_size, page_token, read_body, request_base, store_mesh,
+    page_size, page_token, parse_slot, read_body, request_base, store_mesh,
 };
 use super::{ApiResult, MESH_TYPES};
 use crate::io;
@@ -140,12 +140,7 @@ pub async fn mesh_report(
     let rec = get_mesh_rec(&st, &tenant, &id).await?;
     let store = st.store.clone();
     // Parsed again, so under the same bound on parses at once as uploads.
-    let _slot = st
-        .parse_slots
-        .clone()
-        .acquire_owned()
-        .await
-        .map_err(|_| Problem::internal("parser slots closed"))?;
+    let _slot = parse_slot(&st).await?;
     let body = blocking(move || {
         let bytes = store
             .get_blob(&format!("meshes/{}", rec.id))?

@@ -77,14 +77,7 @@ async fn store_mesh(
     if let Some(existing) = blocking(move || Ok(store.find_mesh_by_sha256(&who, &sha)?)).await? {
         return Ok((existing, false));
     }
-    // Parsing is where an upload's memory goes: a bounded number at once, each bounded by
-    // the triangle limit (counted before the mesh is read).
-    let _slot = st
-        .parse_slots
-        .clone()
-        .acquire_owned()
-        .await
-        .map_err(|_| Problem::internal("parser slots closed"))?;
+    let _slot = parse_slot(st).await?;
     let limits = st.mesh_limits;
     let parsed = tokio::task::spawn_blocking(move || {
         let r = io::load_limited(&bytes, format, &limits).map(|(mesh, warnings)| {
@@ -139,6 +132,17 @@ async fn store_mesh(
     .map_err(|e| Problem::internal(e.to_string()))??;
     st.metrics.uploaded();
     Ok((rec, true))
+}
+
+/// One of the few slots for parsing a mesh: parsing is where an upload's memory goes, so a
+/// bounded number run at once, each bounded by the triangle limit (counted before the mesh
+/// is read).
+async fn parse_slot(st: &AppState) -> Result<tokio::sync::OwnedSemaphorePermit, Problem> {
+    st.parse_slots
+        .clone()
+        .acquire_owned()
+        .await
+        .map_err(|_| Problem::internal("parser slots closed"))
 }
 
 /// A whole request body of at most `limit` bytes: 413 past the limit, 400 when it could not
