@@ -805,3 +805,117 @@ fn a_huge_bow_tie_is_named() {
         "{err}"
     );
 }
+
+/// A full disk (a 3 MB tmpfs under the data directory): uploads get 507 with a problem that
+/// names no path, readiness reports `storage_full` but stays 200, deleting a mesh works
+/// (and frees the space), uploads work again, and no half-written blob is left behind.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_full_disk_is_reported_and_recovered_from() {
+    let root = tmp("hostile-disk");
+    std::fs::create_dir_all(&root).unwrap();
+    let mounted = std::process::Command::new("mount")
+        .args(["-t", "tmpfs", "-o", "size=3m", "tmpfs"])
+        .arg(&root)
+        .status()
+        .is_ok_and(|s| s.success());
+    if !mounted {
+        eprintln!("SKIPPED: cannot mount a small tmpfs here (needs root)");
+        return;
+    }
+    struct Unmount(std::path::PathBuf);
+    impl Drop for Unmount {
+        fn drop(&mut self) {
+            let _ = std::process::Command::new("umount")
+                .arg("-l")
+                .arg(&self.0)
+                .status();
+        }
+    }
+    let _unmount = Unmount(root.clone());
+    let s = Server::start(&root.join("data"), &[]);
+    let c = client();
+    let base = String::from_utf8(fixture("cone_noisy")).unwrap();
+    let mut ids = Vec::new();
+    let refused = loop {
+        let body = format!("{base}# {} {}\n", ids.len(), "x".repeat(30_000));
+        let r = c
+            .post(s.url("/v1/meshes"))
+            .header("content-type", "model/obj")
+            .body(body)
+            .send()
+            .await
+            .unwrap();
+        if r.status() != 201 {
+            break r;
+        }
+        ids.push(json_of(r, "Mesh").await["id"].as_str().unwrap().to_string());
+        assert!(ids.len() < 500, "3 MB never filled");
+    };
+    assert!(refused.headers().contains_key("retry-after"));
+    let p = problem(refused, 507).await;
+    assert_eq!(p["type"], s.url("/problems/insufficient-storage"));
+    assert!(!p["detail"].as_str().unwrap().contains('/'), "{p}");
+    let ready = |c: reqwest::Client, url: String| async move {
+        let r = c.get(url).send().await.unwrap();
+        assert_eq!(r.status(), 200);
+        json_of(r, "Ready").await["storage_full"].as_bool().unwrap()
+    };
+    assert!(
+        ready(c.clone(), s.url("/readyz")).await,
+        "full, not reported"
+    );
+    let r = c
+        .delete(s.url(&format!("/v1/meshes/{}", ids[0])))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 204);
+    assert!(
+        !ready(c.clone(), s.url("/readyz")).await,
+        "still reported full"
+    );
+    let r = c
+        .post(s.url("/v1/meshes"))
+        .header("content-type", "model/obj")
+        .body(format!("{base}# again\n"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 201);
+    let mut stack = vec![root.join("data").join("blobs")];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap().flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                let name = p.to_string_lossy().to_string();
+                assert!(!name.contains(".tmp"), "half-written blob left: {name}");
+            }
+        }
+    }
+    drop(s);
+}
+
+/// A blob a process left half-written when it died is deleted at the next start; one of a
+/// process still running is kept.
+#[test]
+fn half_written_blobs_of_dead_processes_are_swept() {
+    let dir = tmp("hostile-sweep");
+    let meshes = dir.join("blobs").join("meshes");
+    std::fs::create_dir_all(&meshes).unwrap();
+    let dead = meshes.join("m_x.tmp4000000");
+    let alive = meshes.join(format!("m_y.tmp{}", std::process::id()));
+    std::fs::write(&dead, b"partial").unwrap();
+    std::fs::write(&alive, b"partial").unwrap();
+    let s = Server::start(&dir, &[]);
+    assert!(
+        !dead.exists(),
+        "a dead process's temporary blob survived a start"
+    );
+    assert!(
+        alive.exists(),
+        "a live process's temporary blob was deleted"
+    );
+    drop(s);
+}

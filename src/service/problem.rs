@@ -142,8 +142,19 @@ fn cap(s: &mut String, max: usize) {
 
 impl From<StoreError> for Problem {
     fn from(e: StoreError) -> Problem {
+        if let StoreError::Full(_) = e {
+            tracing::warn!(error = %e, "storage full");
+            return Problem::new(
+                StatusCode::INSUFFICIENT_STORAGE,
+                "insufficient-storage",
+                "the server's storage is full: nothing of this request was kept; retry once \
+                 space is freed (reads, downloads and deletes still work)",
+            )
+            .retry_after(60);
+        }
+        // Paths and driver messages go to the log, not to the client.
         tracing::error!(error = %e, "store error");
-        Problem::internal(format!("storage error: {e}"))
+        Problem::internal("storage error (the server log has the details)")
     }
 }
 
@@ -171,6 +182,7 @@ pub const TYPES: &[(&str, &str, &str)] = &[
     ("method-not-allowed", "Method Not Allowed", "The route exists but not with this HTTP method."),
     ("request-timeout", "Request Timeout", "The request (an upload included) took longer than the server's request timeout."),
     ("conflict", "Conflict", "The resource is in a state that forbids the request: results of a job that has not succeeded, a mesh still used by a queued or running job, a cancel of a job that already succeeded or failed."),
+    ("insufficient-storage", "Insufficient Storage", "The server's storage (its data directory or database) is full: nothing of the request was kept. Retry after the time in `Retry-After`, once the operator has freed space; reads, downloads and deletes still work."),
     ("payload-too-large", "Payload Too Large", "The body is larger than the server's upload limit, or the mesh it holds expands to more triangles or vertices than the server's `--max-triangles` (counted after glTF instancing and polygon triangulation, before the mesh is read)."),
     ("unsupported-media-type", "Unsupported Media Type", "The body's media type is not one this route takes (meshes: model/gltf-binary, model/gltf+json, model/obj, application/octet-stream or multipart/form-data; jobs: application/json or multipart/form-data)."),
     ("invalid-request", "Unprocessable Content", "The request is well-formed but a member is wrong: `field` names it (`kind`, `params.tolerance`, `mesh_id`, `page_token`, …) and `detail` says what is expected. For a failed job: its input mesh or parameters turned out unusable."),
@@ -198,6 +210,7 @@ pub fn slug_for(status: StatusCode) -> &'static str {
         422 => "invalid-request",
         429 => "too-many-requests",
         503 => "unavailable",
+        507 => "insufficient-storage",
         _ => "internal",
     }
 }

@@ -615,9 +615,8 @@ impl Executor {
         if let Some(l) = self.live(id) {
             l.cancel.store(true, Ordering::Relaxed);
         }
-        let existed = self.store.delete_job(id)?;
-        self.store.delete_blobs(&format!("jobs/{id}"))?;
-        Ok(existed)
+        let store = self.store.as_ref();
+        super::store::delete_with_blobs(store, &format!("jobs/{id}"), || store.delete_job(id))
     }
 }
 

@@ -173,8 +173,10 @@ pub async fn delete_mesh(
                 "mesh `{id2}` is used by a queued or running job"
             )));
         }
-        store.delete_mesh(&id2)?;
-        store.delete_blobs(&format!("meshes/{id2}"))?;
+        let s = store.as_ref();
+        crate::service::store::delete_with_blobs(s, &format!("meshes/{id2}"), || {
+            s.delete_mesh(&id2)
+        })?;
         Ok(())
     })
     .await?;

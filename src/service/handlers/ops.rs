@@ -20,20 +20,31 @@ pub async fn healthz() -> Response {
 }
 
 /// `GET /readyz`: this replica can serve requests (its store answers; 503 otherwise). A
-/// full queue is not unreadiness: a replica whose queue is full still answers polls and
-/// downloads, so it reports `queue_full` here, in metrics and as 429s on submit.
+/// full queue or a full disk is not unreadiness: the replica still answers polls and
+/// downloads, so it reports `queue_full` (429s on submit) and `storage_full` (507s).
 pub async fn readyz(State(st): State<AppState>) -> ApiResult {
     let (store, exec) = (st.store.clone(), st.exec.clone());
-    let queued = blocking(move || {
-        store.ping().map_err(|e| {
+    let (queued, storage_full) = blocking(move || {
+        let unavailable = |e: crate::service::store::StoreError| {
             Problem::new(
                 StatusCode::SERVICE_UNAVAILABLE,
                 "unavailable",
                 format!("store: {e}"),
             )
             .retry_after(5)
-        })?;
-        Ok(store.count_with_status(Status::Queued)?)
+        };
+        store.ping().map_err(unavailable)?;
+        // A one-byte write tells a full disk (or database) from a healthy one; a full store
+        // still serves reads, downloads and deletes, so it is reported, not unready.
+        let storage_full = match store.put_blob("probe/ready", b"1") {
+            Err(crate::service::store::StoreError::Full(_)) => true,
+            other => {
+                other.map_err(unavailable)?;
+                store.delete_blobs("probe/ready").map_err(unavailable)?;
+                false
+            }
+        };
+        Ok((store.count_with_status(Status::Queued)?, storage_full))
     })
     .await?;
     let max_queued = exec.limits.max_queued;
@@ -42,6 +53,7 @@ pub async fn readyz(State(st): State<AppState>) -> ApiResult {
         "queued": queued,
         "max_queued": max_queued,
         "queue_full": queued >= max_queued,
+        "storage_full": storage_full,
         "running": st.exec.running(),
     }))
     .into_response())

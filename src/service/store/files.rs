@@ -10,10 +10,46 @@ pub struct FileBlobs {
     root: PathBuf,
 }
 
+/// Extension prefix of a blob being written (`.tmp<pid>`).
+const TMP: &str = "tmp";
+
 impl FileBlobs {
     /// Blobs under `root` (created on first write).
     pub fn new(root: PathBuf) -> FileBlobs {
         FileBlobs { root }
+    }
+
+    /// Delete blobs a process left half-written when it died (`*.tmp<pid>` of a process
+    /// that no longer runs; processes sharing the directory keep theirs): none is referenced,
+    /// and each holds space. Returns how many went. Linux only (it asks /proc).
+    pub fn sweep_temporary(&self) -> usize {
+        if !std::path::Path::new("/proc/self").exists() {
+            return 0;
+        }
+        let mut gone = 0;
+        let mut stack = vec![self.root.clone()];
+        while let Some(dir) = stack.pop() {
+            let Ok(entries) = std::fs::read_dir(&dir) else {
+                continue;
+            };
+            for e in entries.flatten() {
+                let p = e.path();
+                if p.is_dir() {
+                    stack.push(p);
+                    continue;
+                }
+                let dead_writer = p
+                    .extension()
+                    .and_then(|x| x.to_str())
+                    .and_then(|x| x.strip_prefix(TMP))
+                    .and_then(|pid| pid.parse::<u32>().ok())
+                    .is_some_and(|pid| !std::path::Path::new(&format!("/proc/{pid}")).exists());
+                if dead_writer && std::fs::remove_file(&p).is_ok() {
+                    gone += 1;
+                }
+            }
+        }
+        gone
     }
 
     fn blob_path(&self, key: &str) -> PathBuf {
@@ -36,13 +72,23 @@ impl FileBlobs {
 impl Blobs for FileBlobs {
     fn put_blob(&self, key: &str, bytes: &[u8]) -> Result<(), StoreError> {
         let path = self.blob_path(key);
-        let io = |e| StoreError::Io(key.to_string(), e);
+        let io = |e: std::io::Error| {
+            if super::is_full(&e) {
+                StoreError::Full(format!("no space for blob {key}"))
+            } else {
+                StoreError::Io(key.to_string(), e)
+            }
+        };
         if let Some(parent) = path.parent() {
             std::fs::create_dir_all(parent).map_err(io)?;
         }
-        let tmp = path.with_extension(format!("tmp{}", std::process::id()));
-        std::fs::write(&tmp, bytes).map_err(io)?;
-        std::fs::rename(&tmp, &path).map_err(io)?;
+        let tmp = path.with_extension(format!("{TMP}{}", std::process::id()));
+        let written = std::fs::write(&tmp, bytes).and_then(|()| std::fs::rename(&tmp, &path));
+        if let Err(e) = written {
+            // A partial file would hold the space a full disk lacks.
+            let _ = std::fs::remove_file(&tmp);
+            return Err(io(e));
+        }
         Ok(())
     }
 

@@ -34,6 +34,35 @@ pub enum StoreError {
     /// A stored row does not decode.
     #[error("corrupt row: {0}")]
     Corrupt(String),
+    /// The storage is full (no space left, quota exceeded): nothing was written.
+    #[error("storage full: {0}")]
+    Full(String),
+}
+
+/// Delete a row with `delete_row` and the blobs under `prefix`. When the storage is too full
+/// for the row's delete to be written (SQLite needs room in its log), the blobs go first and
+/// the row is tried again: a full disk must not keep the API from freeing space.
+pub fn delete_with_blobs(
+    blobs: &dyn Blobs,
+    prefix: &str,
+    delete_row: impl Fn() -> Result<bool, StoreError>,
+) -> Result<bool, StoreError> {
+    let existed = match delete_row() {
+        Err(StoreError::Full(_)) => {
+            blobs.delete_blobs(prefix)?;
+            delete_row()?
+        }
+        other => other?,
+    };
+    blobs.delete_blobs(prefix)?;
+    Ok(existed)
+}
+
+/// Whether an I/O error means the storage is full (ENOSPC, EDQUOT).
+pub fn is_full(e: &std::io::Error) -> bool {
+    e.kind() == std::io::ErrorKind::StorageFull
+        || e.kind() == std::io::ErrorKind::QuotaExceeded
+        || matches!(e.raw_os_error(), Some(28) | Some(122))
 }
 
 /// Named byte strings: uploads and results. Keys are built by the service from generated ids

@@ -33,6 +33,9 @@ impl From<tokio_postgres::Error> for StoreError {
     fn from(e: tokio_postgres::Error) -> StoreError {
         // The server's own message (with its detail) rather than "db error".
         match e.as_db_error() {
+            Some(db) if *db.code() == tokio_postgres::error::SqlState::DISK_FULL => {
+                StoreError::Full(format!("the database: {}", db.message()))
+            }
             Some(db) => backend(format!("{}: {}", db.code().code(), db.message())),
             None => backend(e),
         }

@@ -12,6 +12,9 @@ use std::sync::Mutex;
 
 impl From<rusqlite::Error> for StoreError {
     fn from(e: rusqlite::Error) -> StoreError {
+        if e.sqlite_error_code() == Some(rusqlite::ErrorCode::DiskFull) {
+            return StoreError::Full(format!("the index: {e}"));
+        }
         StoreError::Backend {
             backend: "sqlite",
             message: e.to_string(),
@@ -234,12 +237,20 @@ impl SqliteStore {
             r.busy_timeout(std::time::Duration::from_secs(5))?;
             readers.push(Mutex::new(r));
         }
+        let blobs = FileBlobs::new(dir.join("blobs"));
+        let swept = blobs.sweep_temporary();
+        if swept > 0 {
+            tracing::info!(
+                swept,
+                "deleted blobs left half-written by a process that died"
+            );
+        }
         Ok(SqliteStore {
             conn: Mutex::new(conn),
             readers,
             checkpointer: Mutex::new(checkpointer),
             next_reader: std::sync::atomic::AtomicUsize::new(0),
-            blobs: FileBlobs::new(dir.join("blobs")),
+            blobs,
         })
     }
 
