@@ -281,7 +281,8 @@ async fn amplifying_uploads_are_refused_or_bounded() {
     let p = problem(post_mesh(&c, &s, "model/gltf-binary", body).await, 413).await;
     let detail = p["detail"].as_str().unwrap();
     assert!(
-        detail.contains("8000000 triangles") && detail.contains("--max-triangles"),
+        detail.contains("expands to more than 2000000 triangles (400 mesh instances)")
+            && detail.contains("--max-triangles"),
         "{detail}"
     );
     // 1,600 primitives sharing one index accessor.
@@ -292,6 +293,17 @@ async fn amplifying_uploads_are_refused_or_bounded() {
     )
     .await;
     assert!(p["detail"].as_str().unwrap().contains("triangles"), "{p}");
+    // Primitives that are skipped (POINTS) cost too: 2,000 of them instanced by 1,001 nodes.
+    let mut doc = grid_doc(100, 2000, 1001, 1, bin.len());
+    for p in doc["meshes"][0]["primitives"].as_array_mut().unwrap() {
+        p["mode"] = json!(0);
+    }
+    let p = problem(
+        post_mesh(&c, &s, "model/gltf-binary", glb(&doc, &bin)).await,
+        413,
+    )
+    .await;
+    assert!(p["detail"].as_str().unwrap().contains("primitives"), "{p}");
     // 400 uri-less buffers over a 1 MB binary chunk: read, not copied 400 times.
     let (mut bin, _, _) = grid_bin(10);
     let grid_len = bin.len();
@@ -807,8 +819,9 @@ fn a_huge_bow_tie_is_named() {
 }
 
 /// A full disk (a 3 MB tmpfs under the data directory): uploads get 507 with a problem that
-/// names no path, readiness reports `storage_full` but stays 200, deleting a mesh works
-/// (and frees the space), uploads work again, and no half-written blob is left behind.
+/// names no path, readiness reports `storage_full` (no room for 64 KiB) but stays 200,
+/// deleting meshes works (and frees the space), uploads work again, and no half-written blob
+/// is left behind.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_full_disk_is_reported_and_recovered_from() {
     let root = tmp("hostile-disk");
@@ -864,12 +877,14 @@ async fn a_full_disk_is_reported_and_recovered_from() {
         ready(c.clone(), s.url("/readyz")).await,
         "full, not reported"
     );
-    let r = c
-        .delete(s.url(&format!("/v1/meshes/{}", ids[0])))
-        .send()
-        .await
-        .unwrap();
-    assert_eq!(r.status(), 204);
+    for id in &ids[..5] {
+        let r = c
+            .delete(s.url(&format!("/v1/meshes/{id}")))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 204);
+    }
     assert!(
         !ready(c.clone(), s.url("/readyz")).await,
         "still reported full"

@@ -92,10 +92,22 @@ fn check_expansion(
     limits: &super::Limits,
 ) -> Result<(), ReadError> {
     let instances = scene_instances(doc)?;
-    let (mut triangles, mut vertices) = (0usize, 0usize);
+    let (mut triangles, mut vertices, mut primitives) = (0usize, 0usize, 0usize);
     let mut spaces: std::collections::HashSet<(usize, usize)> = Default::default();
+    let too_large = |n: usize, what: &str| ReadError::TooLarge {
+        what: format!(
+            "the scene expands to more than {n} {what} ({} mesh instances)",
+            instances.len()
+        ),
+        limit: limits.max_triangles,
+    };
     for inst in &instances {
         for prim in inst.mesh.primitives() {
+            // Every instance of every primitive costs something, skipped ones included.
+            primitives += 1;
+            if primitives > limits.max_triangles {
+                return Err(too_large(primitives - 1, "primitives"));
+            }
             if prim.mode() != gltf::mesh::Mode::Triangles {
                 continue;
             }
@@ -112,17 +124,12 @@ fn check_expansion(
             if prim.indices().is_none() || spaces.insert((inst.node, pos.index())) {
                 vertices = vertices.saturating_add(pos.count());
             }
-        }
-    }
-    for (n, what) in [(triangles, "triangles"), (vertices, "vertices")] {
-        if n > limits.max_triangles {
-            return Err(ReadError::TooLarge {
-                what: format!(
-                    "the scene expands to {n} {what} ({} mesh instances)",
-                    instances.len()
-                ),
-                limit: limits.max_triangles,
-            });
+            // Refused as soon as it is known, not after counting a hostile scene through.
+            for (n, what) in [(triangles, "triangles"), (vertices, "vertices")] {
+                if n > limits.max_triangles {
+                    return Err(too_large(limits.max_triangles, what));
+                }
+            }
         }
     }
     Ok(())
@@ -447,23 +454,30 @@ fn assemble(
     // (node, POSITION accessor) → first vertex of that space.
     let mut spaces: HashMap<(usize, usize), (u32, usize)> = HashMap::new();
     let mut num_spaces = 0u32;
+    let mut skipped_seen: std::collections::HashSet<(usize, usize)> = Default::default();
 
     for inst in scene_instances(doc)? {
         let flip = det3(&inst.world) < 0.0;
         for prim in inst.mesh.primitives() {
             let where_ = format!("meshes[{}].primitives[{}]", inst.mesh.index(), prim.index());
+            // Skipped primitives are named once per mesh, however often it is instanced.
+            let first_sight = skipped_seen.insert((inst.mesh.index(), prim.index()));
             if prim.mode() != gltf::mesh::Mode::Triangles {
-                warnings.push(Warning::new(
-                    "primitive_skipped",
-                    format!("{where_}: mode {:?} is not TRIANGLES; skipped", prim.mode()),
-                ));
+                if first_sight {
+                    warnings.push(Warning::new(
+                        "primitive_skipped",
+                        format!("{where_}: mode {:?} is not TRIANGLES; skipped", prim.mode()),
+                    ));
+                }
                 continue;
             }
             let Some(pos_acc) = prim.get(&gltf::Semantic::Positions) else {
-                warnings.push(Warning::new(
-                    "primitive_skipped",
-                    format!("{where_}: no POSITION attribute; skipped"),
-                ));
+                if first_sight {
+                    warnings.push(Warning::new(
+                        "primitive_skipped",
+                        format!("{where_}: no POSITION attribute; skipped"),
+                    ));
+                }
                 continue;
             };
             let indexed = prim.indices();

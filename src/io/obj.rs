@@ -126,6 +126,12 @@ pub fn read_limited(
                 let x = parse_f64(toks.next(), line_no, "x coordinate")?;
                 let y = parse_f64(toks.next(), line_no, "y coordinate")?;
                 let z = parse_f64(toks.next(), line_no, "z coordinate")?;
+                if raw.positions.len() >= limits.max_triangles {
+                    return Err(ReadError::TooLarge {
+                        what: format!("vertices up to line {line_no}"),
+                        limit: limits.max_triangles,
+                    });
+                }
                 raw.positions.push([x, y, z]);
             }
             "vt" => {
@@ -134,6 +140,12 @@ pub fn read_limited(
                     Some(t) => parse_f64(Some(t), line_no, "v coordinate")?,
                     None => 0.0,
                 };
+                if uvs.len() >= limits.max_triangles {
+                    return Err(ReadError::TooLarge {
+                        what: format!("texture coordinates up to line {line_no}"),
+                        limit: limits.max_triangles,
+                    });
+                }
                 uvs.push([u, v]);
             }
             "vn" => {
@@ -163,6 +175,13 @@ pub fn read_limited(
                     }
                     if parts.next().is_some() {
                         return Err(syntax(line_no, format!("malformed face vertex {tok:?}")));
+                    }
+                    // Checked as it grows: a face line can be as long as the file.
+                    if poly.len() == MAX_POLYGON {
+                        return Err(syntax(
+                            line_no,
+                            format!("face with more than {MAX_POLYGON} vertices (not supported)"),
+                        ));
                     }
                     poly.push((v, vt));
                 }

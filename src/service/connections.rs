@@ -62,6 +62,9 @@ pub async fn serve(
             drop(slot);
         });
     }
+    // New clients are refused at once (they can go to another replica) while open requests
+    // finish.
+    drop(listener);
     if tokio::time::timeout(DRAIN, graceful.shutdown())
         .await
         .is_err()

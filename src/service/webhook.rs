@@ -237,13 +237,17 @@ impl Webhooks {
         runtime: tokio::runtime::Handle,
         metrics: Arc<Metrics>,
     ) -> Webhooks {
+        // No proxy from the environment: a proxy would resolve the target itself, past the
+        // resolver's check.
         let client = reqwest::Client::builder()
+            .no_proxy()
             .dns_resolver(Arc::new(CheckedResolver { allow_private }))
             .timeout(Duration::from_secs(10))
             .redirect(reqwest::redirect::Policy::none())
             .user_agent(concat!("flatmesh/", env!("CARGO_PKG_VERSION")))
             .build()
-            .unwrap_or_default();
+            // Never a default client in its place: that one would skip the address checks.
+            .expect("the webhook HTTP client cannot be built (TLS initialisation failed)");
         Webhooks {
             key,
             allow_private,

@@ -356,7 +356,14 @@ async fn insert_job(
         Ok((Some(store.insert_job(&record)?), queued))
     })
     .await;
-    let (inserted, queued) = inserted?;
+    let (inserted, queued) = match inserted {
+        Ok(v) => v,
+        Err(p) => {
+            // The job could not be stored (a full store, say): nor are its uploads kept.
+            let _ = forget_uploads(st, stored_here).await;
+            return Err(p);
+        }
+    };
     let retry =
         st.exec
             .eta

@@ -140,8 +140,9 @@ pub async fn mesh_report(
     let rec = get_mesh_rec(&st, &tenant, &id).await?;
     let store = st.store.clone();
     // Parsed again, so under the same bound on parses at once as uploads.
-    let _slot = parse_slot(&st).await?;
+    let slot = parse_slot(&st).await?;
     let body = blocking(move || {
+        let _slot = slot;
         let bytes = store
             .get_blob(&format!("meshes/{}", rec.id))?
             .ok_or_else(|| Problem::internal("mesh bytes lost"))?;

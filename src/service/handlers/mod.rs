@@ -77,9 +77,11 @@ async fn store_mesh(
     if let Some(existing) = blocking(move || Ok(store.find_mesh_by_sha256(&who, &sha)?)).await? {
         return Ok((existing, false));
     }
-    let _slot = parse_slot(st).await?;
+    let slot = parse_slot(st).await?;
     let limits = st.mesh_limits;
     let parsed = tokio::task::spawn_blocking(move || {
+        // Held by the parse itself: a client that goes away does not free it early.
+        let _slot = slot;
         let r = io::load_limited(&bytes, format, &limits).map(|(mesh, warnings)| {
             let report = crate::report::Report::compute(&mesh, &warnings);
             json!({
@@ -125,8 +127,12 @@ async fn store_mesh(
     let store = st.store.clone();
     let r2 = rec.clone();
     tokio::task::spawn_blocking(move || {
-        store.put_blob(&format!("meshes/{}", r2.id), &bytes)?;
-        store.insert_mesh(&r2)
+        let key = format!("meshes/{}", r2.id);
+        store.put_blob(&key, &bytes)?;
+        // Nothing of a refused upload is kept (a full index, say).
+        store.insert_mesh(&r2).inspect_err(|_| {
+            let _ = store.delete_blobs(&key);
+        })
     })
     .await
     .map_err(|e| Problem::internal(e.to_string()))??;

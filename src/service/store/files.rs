@@ -43,7 +43,12 @@ impl FileBlobs {
                     .and_then(|x| x.to_str())
                     .and_then(|x| x.strip_prefix(TMP))
                     .and_then(|pid| pid.parse::<u32>().ok())
-                    .is_some_and(|pid| !std::path::Path::new(&format!("/proc/{pid}")).exists());
+                    .is_some_and(|pid| {
+                        // This process has written nothing yet: a file with its id is from an
+                        // earlier process that had the same one (PID 1 in a container).
+                        pid == std::process::id()
+                            || !std::path::Path::new(&format!("/proc/{pid}")).exists()
+                    });
                 if dead_writer && std::fs::remove_file(&p).is_ok() {
                     gone += 1;
                 }
