@@ -28,14 +28,7 @@ async fn receiver(addr: &str, hits: Arc<AtomicUsize>) -> std::io::Result<u16> {
 }
 
 async fn metric(c: &reqwest::Client, s: &Server, line: &str) -> u64 {
-    let text = c
-        .get(s.url("/metrics"))
-        .send()
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    let text = metrics_text(c, s).await;
     text.lines()
         .find_map(|l| l.strip_prefix(line)?.trim().parse().ok())
         .unwrap_or_else(|| panic!("{line} not in {text}"))
@@ -897,17 +890,9 @@ async fn a_full_disk_is_reported_and_recovered_from() {
         .await
         .unwrap();
     assert_eq!(r.status(), 201);
-    let mut stack = vec![root.join("data").join("blobs")];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap().flatten() {
-            let p = e.path();
-            if p.is_dir() {
-                stack.push(p);
-            } else {
-                let name = p.to_string_lossy().to_string();
-                assert!(!name.contains(".tmp"), "half-written blob left: {name}");
-            }
-        }
+    for p in files_in(&root.join("data").join("blobs")) {
+        let name = p.to_string_lossy().to_string();
+        assert!(!name.contains(".tmp"), "half-written blob left: {name}");
     }
     drop(s);
 }

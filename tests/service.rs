@@ -232,14 +232,7 @@ async fn operational_endpoints() {
         .unwrap();
     assert_eq!(text, std::fs::read_to_string("openapi.yaml").unwrap());
     upload(&c, &s, fixture("cylinder")).await;
-    let m = c
-        .get(s.url("/metrics"))
-        .send()
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    let m = metrics_text(&c, &s).await;
     assert!(m.contains("flatmesh_meshes_uploaded_total 1\n"), "{m}");
     assert!(m.contains("# TYPE flatmesh_jobs_queued gauge"));
     // The log goes to a file here: plain text, no terminal colour codes.
@@ -1471,23 +1464,14 @@ async fn problem_types_are_absolute_and_documented() {
 
 /// Every file under `dir` (path, size), except the SQLite files, whose pages change on reads.
 fn files_under(dir: &Path) -> Vec<(PathBuf, u64)> {
-    let mut out = Vec::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap() {
-            let e = e.unwrap();
-            let p = e.path();
-            if p.is_dir() {
-                stack.push(p);
-            } else if !p.to_string_lossy().contains("flatmesh.sqlite3")
-                && !p.ends_with("server.log")
-            {
-                out.push((p, e.metadata().unwrap().len()));
-            }
-        }
-    }
-    out.sort();
-    out
+    files_in(dir)
+        .into_iter()
+        .filter(|p| !p.to_string_lossy().contains("flatmesh.sqlite3") && !p.ends_with("server.log"))
+        .map(|p| {
+            let len = std::fs::metadata(&p).unwrap().len();
+            (p, len)
+        })
+        .collect()
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -1611,14 +1595,7 @@ async fn cancel_full_queue_time_limit() {
     assert_eq!(ready["queue_full"], true, "{ready}");
     assert_eq!(ready["queued"], ready["max_queued"], "{ready}");
     // ... and in metrics: the queue at its limit, the refusal counted.
-    let m = c
-        .get(s.url("/metrics"))
-        .send()
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    let m = metrics_text(&c, &s).await;
     for line in [
         "flatmesh_jobs_queued 1",
         "flatmesh_jobs_queue_limit 1",

@@ -291,6 +291,35 @@ pub fn pattern_edges(pat: &Value, positions: &[[f64; 3]]) -> Vec<(f64, f64)> {
     out
 }
 
+/// Every file under `dir`, recursively, sorted.
+pub fn files_in(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap().flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                out.push(p);
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+/// The server's Prometheus text.
+pub async fn metrics_text(c: &reqwest::Client, s: &Server) -> String {
+    c.get(s.url("/metrics"))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap()
+}
+
 pub async fn wait_for(c: &reqwest::Client, s: &Server, id: &str, want: &[&str]) -> Value {
     let start = Instant::now();
     loop {
