@@ -8,6 +8,7 @@
 
 pub mod algorithms;
 pub mod corpus;
+pub mod cost;
 pub mod fixtures;
 pub mod geometry;
 pub mod io;

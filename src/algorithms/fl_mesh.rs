@@ -467,6 +467,9 @@ impl Control for Renamed<'_> {
     fn cancelled(&self) -> bool {
         self.0.cancelled()
     }
+    fn cancelled_before(&self, seconds: f64) -> bool {
+        self.0.cancelled_before(seconds)
+    }
 }
 
 /// One run of the solver with fixed parameters (see [`solve`]).
@@ -498,12 +501,18 @@ fn solve_phase(
     // stationarity, free vertices). A round whose refinement did not lower ϖ_max is dropped.
     let mut best: Option<(f64, Mesh, usize, usize, f64, usize)> = None;
     loop {
+        let faces = current.triangles().len() as f64;
+        if control.cancelled_before(crate::cost::FL_MESH_SETUP.seconds(faces)) {
+            return Err(AlgoError::Cancelled);
+        }
+        let setup = std::time::Instant::now();
         let mut sys = System::new(
             &current,
             &impossible,
             params,
             keep.map(|k| (k, &floors[..])),
         )?;
+        crate::cost::FL_MESH_SETUP.learn(faces, setup.elapsed().as_secs_f64());
         let round = Round {
             mesh: &current,
             grid: input_grid.as_ref(),
@@ -1050,7 +1059,7 @@ impl<'a> System<'a> {
         let mut fair = 1.0f64;
         let mut prev_wmax = f64::INFINITY;
         loop {
-            if control.cancelled() {
+            if control.cancelled_before(self.lu.predicted_factor_seconds()) {
                 return Err(AlgoError::Cancelled);
             }
             // With an obstacle, done also means every free vertex at the clearance or beyond.
@@ -1759,6 +1768,14 @@ impl Factor {
         match self {
             Factor::Lu(s) => s.factor(values),
             Factor::Ldlt(s) => s.factor(values),
+        }
+    }
+    /// Expected seconds of the next factorisation (0 when unknown: the LU's fill is only known
+    /// after pivoting).
+    fn predicted_factor_seconds(&self) -> f64 {
+        match self {
+            Factor::Lu(_) => 0.0,
+            Factor::Ldlt(s) => s.predicted_factor_seconds(),
         }
     }
     fn solve_in_place(&mut self, rhs: &mut [f64]) -> Result<(), LinalgError> {

@@ -38,6 +38,13 @@ pub trait Control: Sync {
     /// Whether the caller asked to stop; algorithms check once per iteration and then return
     /// [`AlgoError::Cancelled`].
     fn cancelled(&self) -> bool;
+    /// [`Control::cancelled`] before a step that cannot be interrupted and is expected to take
+    /// `seconds` (a sparse factorisation): a caller with a deadline also says stop when the
+    /// step would end past it. Wrappers must forward it.
+    fn cancelled_before(&self, seconds: f64) -> bool {
+        let _ = seconds;
+        self.cancelled()
+    }
 }
 
 /// A [`Control`] that ignores progress and can be cancelled through a flag.

@@ -282,6 +282,9 @@ impl Control for LevelControl<'_> {
     fn cancelled(&self) -> bool {
         self.inner.cancelled()
     }
+    fn cancelled_before(&self, seconds: f64) -> bool {
+        self.inner.cancelled_before(seconds)
+    }
 }
 
 /// What `subdivide` reports.

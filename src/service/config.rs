@@ -63,7 +63,8 @@ pub struct Config {
     /// Most jobs waiting for a worker; beyond it submits get 429.
     #[arg(long, env = "FLATMESH_MAX_QUEUED", default_value_t = 64)]
     pub max_queued: usize,
-    /// Wall-clock limit of one job run, e.g. `30m`.
+    /// Wall-clock limit of one job run, e.g. `30m`; a step expected to end past it is not
+    /// started (the job then fails with `time-limit`).
     #[arg(long, env = "FLATMESH_JOB_TIME_LIMIT", default_value = "1h", value_parser = parse_duration)]
     pub job_time_limit: Duration,
     /// How long results of ended jobs are kept, and uploads that no job uses, e.g. `7d`.

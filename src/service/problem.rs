@@ -190,7 +190,7 @@ pub const TYPES: &[(&str, &str, &str)] = &[
     ("too-many-requests", "Too Many Requests", "Too many requests; retry after the `Retry-After` seconds."),
     ("unavailable", "Service Unavailable", "The server cannot reach its store; retry after the `Retry-After` seconds."),
     ("internal", "Internal Server Error", "Something broke on the server's side; the log has the details (search it for the response's `x-request-id`)."),
-    ("time-limit", "Unprocessable Content", "A job ran longer than the server's job time limit and was stopped. Submit it with a looser tolerance or fewer iterations, or ask for a longer limit."),
+    ("time-limit", "Unprocessable Content", "A job reached the server's job time limit, or was about to start a step that would have ended past it, and was stopped. Submit it with a looser tolerance or fewer iterations, or ask for a longer limit."),
     ("algorithm-failed", "Unprocessable Content", "The algorithm stopped with an error on this input (`detail` says why), for example a mesh it cannot handle."),
     ("interrupted", "Internal Server Error", "The job's process stopped while it ran, as many times as the server allows (`--max-attempts`); submit it again."),
     ("cancelled", "Cancelled", "A client cancelled the job (before it started or while it ran); it has no results. Not an error of the job itself."),

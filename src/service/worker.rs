@@ -13,7 +13,7 @@ use crate::io;
 use crate::jobs::{artifacts, Input, JobOutcome, JobSpec};
 use std::collections::HashMap;
 use std::panic::{catch_unwind, AssertUnwindSafe};
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 
@@ -81,10 +81,38 @@ pub struct Executor {
 /// How often an idle claim loop looks for work queued by another process.
 const POLL: Duration = Duration::from_millis(200);
 
+/// A running job's [`Control`]: its cancel flag and its time limit. A step is not started when
+/// it would end past the deadline, its duration taken as the larger of what the algorithm
+/// expects ([`Control::cancelled_before`]) and the stretch between the last two checks (an
+/// iteration predicts the next), so that a job ends at its limit rather than one step past it.
 struct JobControl<'a> {
     live: &'a Live,
-    deadline: Instant,
-    timed_out: AtomicBool,
+    start: Instant,
+    limit: Duration,
+    /// Microseconds after `start` of the last check.
+    last_check: AtomicU64,
+    /// Set when the time limit stopped the job: microseconds after `start`, plus one.
+    timed_out_at: AtomicU64,
+}
+
+impl<'a> JobControl<'a> {
+    fn new(live: &'a Live, start: Instant, limit: Duration) -> Self {
+        Self {
+            live,
+            start,
+            limit,
+            last_check: AtomicU64::new(0),
+            timed_out_at: AtomicU64::new(0),
+        }
+    }
+
+    /// When the time limit stopped the job (seconds after its start), if it did.
+    fn timed_out(&self) -> Option<f64> {
+        match self.timed_out_at.load(Ordering::Relaxed) {
+            0 => None,
+            t => Some((t - 1) as f64 * 1e-6),
+        }
+    }
 }
 
 impl Control for JobControl<'_> {
@@ -100,11 +128,23 @@ impl Control for JobControl<'_> {
         self.live.progress_dirty.store(true, Ordering::Relaxed);
     }
     fn cancelled(&self) -> bool {
+        self.cancelled_before(0.0)
+    }
+    fn cancelled_before(&self, seconds: f64) -> bool {
         if self.live.cancel.load(Ordering::Relaxed) {
             return true;
         }
-        if Instant::now() >= self.deadline {
-            self.timed_out.store(true, Ordering::Relaxed);
+        let now = self.start.elapsed().as_micros().min(u64::MAX as u128 / 2) as u64;
+        let last_stretch = now.saturating_sub(self.last_check.swap(now, Ordering::Relaxed));
+        let next = (seconds.clamp(0.0, 1e9) * 1e6) as u64;
+        let limit = self.limit.as_micros().min(u64::MAX as u128 / 4) as u64;
+        if now.saturating_add(next.max(last_stretch)) >= limit {
+            let _ = self.timed_out_at.compare_exchange(
+                0,
+                now + 1,
+                Ordering::Relaxed,
+                Ordering::Relaxed,
+            );
             return true;
         }
         false
@@ -414,11 +454,7 @@ impl Executor {
         self.running.fetch_add(1, Ordering::AcqRel);
         self.metrics.set_running(self.running());
         let start = Instant::now();
-        let control = JobControl {
-            live: &live,
-            deadline: start + self.limits.time_limit,
-            timed_out: AtomicBool::new(false),
-        };
+        let control = JobControl::new(&live, start, self.limits.time_limit);
         tracing::info!(job = %id, kind = %job.kind, attempt = job.attempts, worker, "job started");
         let result = self
             .pool
@@ -483,14 +519,17 @@ impl Executor {
         match result {
             Ok(Ok((artifacts, outcome))) => (Status::Succeeded, None, artifacts, Some(outcome)),
             Ok(Err(ExecError::Algo(AlgoError::Cancelled))) => {
-                if control.timed_out.load(Ordering::Relaxed) {
-                    let p = JobError::new(
-                        ErrorCode::TimeLimit,
+                if let Some(at) = control.timed_out() {
+                    let limit = self.limits.time_limit.as_secs_f64();
+                    let detail = if at >= limit {
+                        format!("the job exceeded its time limit of {limit} s")
+                    } else {
                         format!(
-                            "the job exceeded its time limit of {} s",
-                            self.limits.time_limit.as_secs_f64()
-                        ),
-                    );
+                            "the job was stopped after {at:.2} s: its next step would have \
+                             ended past its time limit of {limit} s"
+                        )
+                    };
+                    let p = JobError::new(ErrorCode::TimeLimit, detail);
                     (Status::Failed, Some(p), vec![], None)
                 } else {
                     (Status::Cancelled, None, vec![], None)

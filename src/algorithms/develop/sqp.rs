@@ -152,7 +152,7 @@ pub(super) fn run(
     let dim = kkt.rhs.len() / 2;
     run.stop = Stop::MaxIterations;
     for it in 1..=params.max_iterations {
-        if control.cancelled() {
+        if control.cancelled_before(kkt.solver.predicted_factor_seconds()) {
             return Err(AlgoError::Cancelled);
         }
         run.iterations = it;

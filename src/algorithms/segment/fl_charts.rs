@@ -121,6 +121,9 @@ impl Control for Quiet<'_> {
     fn cancelled(&self) -> bool {
         self.0.cancelled()
     }
+    fn cancelled_before(&self, seconds: f64) -> bool {
+        self.0.cancelled_before(seconds)
+    }
 }
 
 /// Run fl-mesh on every chart of `labels` (`k` labels), splitting failed ones until each
