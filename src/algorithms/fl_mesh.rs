@@ -483,7 +483,7 @@ fn solve_phase(
     let mut current = mesh.clone();
     let impossible = impossible_vertices(mesh);
     let input_grid = match params.anchor {
-        Anchor::Closest => Some(crate::spatial::TriangleGrid::new(
+        Anchor::Closest => Some(crate::spatial::TriangleBvh::new(
             mesh.positions(),
             mesh.triangles(),
         )),
@@ -719,7 +719,7 @@ enum End {
 #[derive(Clone, Copy)]
 struct Round<'a> {
     mesh: &'a Mesh,
-    grid: Option<&'a crate::spatial::TriangleGrid>,
+    grid: Option<&'a crate::spatial::TriangleBvh>,
     params: &'a Params,
     control: &'a dyn Control,
 }

@@ -1,6 +1,6 @@
 //! The reference body H of Eq. 20: signed distance s(v) = (v − h)·n_h from its closest point h,
-//! positive outside. The closest point comes from the crate's uniform grid
-//! ([`crate::spatial::TriangleGrid`]: exact, already used for Hausdorff distances, no second
+//! positive outside. The closest point comes from the crate's closest-point hierarchy
+//! ([`crate::spatial::TriangleBvh`]: exact, already used for Hausdorff distances, no second
 //! spatial index to keep in step); the sign from the angle-weighted pseudo-normal of the
 //! feature (face, edge or vertex) that holds h (Bærentzen & Aanæs 2005), which, unlike the
 //! normal of the face that holds h, gives the right side everywhere on a closed surface.
@@ -11,14 +11,14 @@
 
 use crate::geometry::corner_angle;
 use crate::mesh::{cross, dot, sub, Mesh};
-use crate::spatial::TriangleGrid;
+use crate::spatial::TriangleBvh;
 use std::collections::HashMap;
 
 /// A reference body ready for signed-distance queries.
 pub struct Body {
     positions: Vec<[f64; 3]>,
     triangles: Vec<[u32; 3]>,
-    grid: TriangleGrid,
+    grid: TriangleBvh,
     face_normal: Vec<[f64; 3]>,
     vertex_normal: Vec<[f64; 3]>,
     edge_normal: HashMap<(u32, u32), [f64; 3]>,
@@ -97,7 +97,7 @@ impl Body {
         }
         let vertex_normal = vertex_normal.into_iter().map(unit).collect();
         let edge_normal = edge_normal.into_iter().map(|(e, n)| (e, unit(n))).collect();
-        let grid = TriangleGrid::new(&positions, &triangles);
+        let grid = TriangleBvh::new(&positions, &triangles);
         (
             Body {
                 positions,
