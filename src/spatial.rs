@@ -108,11 +108,17 @@ impl TriangleBvh {
     /// triangle.
     pub fn closest(&self, p: [f64; 3]) -> ([f64; 3], f64, u32) {
         use parry3d_f64::query::PointQueryWithLocation;
-        let (proj, (tri, _)) = self.mesh.project_local_point_and_get_location(
+        let (_, (tri, _)) = self.mesh.project_local_point_and_get_location(
             parry3d_f64::math::Vector::new(p[0], p[1], p[2]),
             false,
         );
-        let q = [proj.point.x, proj.point.y, proj.point.z];
+        // The point itself from the triangle parry chose, by the same formula as every
+        // brute-force check: its rounding then agrees with theirs to the last bit.
+        let [a, b, c] = self.mesh.indices()[tri as usize].map(|i| {
+            let v = self.mesh.vertices()[i as usize];
+            [v.x, v.y, v.z]
+        });
+        let q = closest_point_on_triangle(p, a, b, c);
         let d = sub(q, p);
         (q, dot(d, d), tri)
     }

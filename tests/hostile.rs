@@ -963,3 +963,77 @@ async fn a_long_thin_fan_is_processed_in_bounded_memory() {
         _ => eprintln!("SKIPPED the memory bound: no /proc here"),
     }
 }
+
+/// Send `head` on a new connection; the whole answer (the server closes after it).
+async fn raw_answer(s: &Server, head: &[u8]) -> String {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let addr = s.base.strip_prefix("http://").unwrap();
+    let mut tcp = tokio::net::TcpStream::connect(addr).await.unwrap();
+    // The server may answer and close before it has read everything: ignore a reset.
+    let _ = tcp.write_all(head).await;
+    let mut answer = Vec::new();
+    let _ = tokio::time::timeout(Duration::from_secs(10), tcp.read_to_end(&mut answer)).await;
+    String::from_utf8_lossy(&answer).to_string()
+}
+
+/// Item 7: the answers hyper writes itself, to a head it cannot parse (400, 414, 431), are
+/// problem+json like every other error (they had empty bodies).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn unparsable_heads_get_problem_answers() {
+    let s = Server::start(&tmp("hostile-heads"), &[]);
+    let long_uri = format!(
+        "GET /v1/jobs?x={} HTTP/1.1\r\nhost: x\r\n\r\n",
+        "a".repeat(70_000)
+    );
+    let mut many = String::from("GET /healthz HTTP/1.1\r\nhost: x\r\n");
+    for i in 0..120 {
+        many += &format!("x-h{i}: {i}\r\n");
+    }
+    many += "\r\n";
+    let big = format!(
+        "GET /healthz HTTP/1.1\r\nhost: x\r\nx-big: {}\r\n\r\n",
+        "b".repeat(500_000)
+    );
+    let cases: [(&[u8], u16, &str); 5] = [
+        (b"GARBAGE\r\n\r\n", 400, "bad-request"),
+        (
+            b"GET /healthz HTTP/1.1\r\nhost: x\r\nbad header\r\n\r\n",
+            400,
+            "bad-request",
+        ),
+        (long_uri.as_bytes(), 414, "uri-too-long"),
+        (many.as_bytes(), 431, "header-fields-too-large"),
+        (big.as_bytes(), 431, "header-fields-too-large"),
+    ];
+    for (head, status, slug) in cases {
+        let answer = raw_answer(&s, head).await;
+        let what = String::from_utf8_lossy(&head[..head.len().min(60)]).to_string();
+        let (top, body) = answer
+            .split_once("\r\n\r\n")
+            .unwrap_or_else(|| panic!("{what}: no answer: {answer:?}"));
+        assert!(
+            top.starts_with(&format!("HTTP/1.1 {status} ")),
+            "{what}: {top}"
+        );
+        assert!(
+            top.to_ascii_lowercase()
+                .contains("content-type: application/problem+json"),
+            "{what}: {top}"
+        );
+        let p: serde_json::Value = serde_json::from_str(body).unwrap();
+        assert_eq!(p["status"], status, "{p}");
+        assert_eq!(p["type"], format!("/problems/{slug}"), "{p}");
+        // The type is documented where it points.
+        let doc = reqwest::get(s.url(&format!("/problems/{slug}")))
+            .await
+            .unwrap();
+        assert_eq!(doc.status(), 200, "/problems/{slug}");
+    }
+    // The server still answers normally.
+    let ok = raw_answer(
+        &s,
+        b"GET /healthz HTTP/1.1\r\nhost: x\r\nconnection: close\r\n\r\n",
+    )
+    .await;
+    assert!(ok.starts_with("HTTP/1.1 200"), "{ok}");
+}

@@ -224,7 +224,7 @@ fn sleeve_stays_clear_of_the_arm() {
         };
         let (out, s) = run(&garment, Some(&body), &p);
         let fig = s.body.as_ref().unwrap();
-        let (mut pen_in, mut pen_out) = (0, 0);
+        let (mut pen_in, mut pen_out, mut deep_out) = (0, 0, 0);
         let mut started_clear = 0;
         for v in 0..garment.num_vertices() as u32 {
             let a = brute_signed(&body, garment.position(v));
@@ -239,6 +239,7 @@ fn sleeve_stays_clear_of_the_arm() {
             );
             pen_in += usize::from(a < 0.0);
             pen_out += usize::from(b < 0.0);
+            deep_out += usize::from(b < -1e-9 * h);
             if a >= clearance {
                 started_clear += 1;
                 assert!(
@@ -269,7 +270,9 @@ fn sleeve_stays_clear_of_the_arm() {
             // The dents can be pushed out: a round sleeve clear of the arm is developable.
             assert!(s.converged, "{}", s.stop_detail);
             assert!(varpi_max(&out) <= 1e-6);
-            assert_eq!(pen_out, 0);
+            // Pushed out to the surface, within the tolerance of the guarantee above (one
+            // vertex ends 1.7e-13 inside: rounding of the contact constraint at c = 0).
+            assert_eq!(deep_out, 0);
         }
     }
 }

@@ -2,18 +2,22 @@
 //! head (a client that sends its headers slowly, or never, is dropped: slowloris; an idle
 //! keep-alive connection likewise) and a cap on open connections (accepting waits for a free
 //! slot, so file descriptors stay bounded). `axum::serve` offers neither, hence this loop.
+//! Heads hyper cannot parse get a problem body ([`super::head_errors`]).
 
 use std::future::Future;
 use std::sync::Arc;
 use std::time::Duration;
 
 /// Bounds on connections.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct ConnLimits {
     /// Most connections open at once.
     pub max_connections: usize,
     /// Time allowed for a request's head (request line and headers) to arrive.
     pub header_timeout: Duration,
+    /// Base of problem `type` URLs in the answers to heads that cannot be parsed
+    /// (`--public-url`; empty: relative).
+    pub problem_base: Arc<str>,
 }
 
 /// How long in-flight requests get to finish once shutdown begins.
@@ -55,7 +59,11 @@ pub async fn serve(
         };
         let _ = stream.set_nodelay(true);
         let service = hyper_util::service::TowerToHyperService::new(app.clone());
-        let conn = http.serve_connection(hyper_util::rt::TokioIo::new(stream), service);
+        let io = super::head_errors::ProblemAnswers::new(
+            hyper_util::rt::TokioIo::new(stream),
+            Arc::clone(&limits.problem_base),
+        );
+        let conn = http.serve_connection(io, service);
         let conn = graceful.watch(conn);
         tokio::spawn(async move {
             let _ = conn.await;

@@ -16,6 +16,7 @@ pub mod connections;
 pub mod domain;
 pub mod eta;
 pub mod handlers;
+pub mod head_errors;
 pub mod metrics;
 pub mod problem;
 pub mod router;
@@ -178,6 +179,7 @@ async fn serve_async(cfg: Config) -> Result<(), String> {
     let limits = connections::ConnLimits {
         max_connections: cfg.max_connections,
         header_timeout: cfg.header_timeout,
+        problem_base: Arc::from(cfg.public_url.as_deref().unwrap_or("")),
     };
     connections::serve(listener, app, limits, shutdown()).await;
     Ok(())
