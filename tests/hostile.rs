@@ -818,26 +818,9 @@ fn a_huge_bow_tie_is_named() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_full_disk_is_reported_and_recovered_from() {
     let root = tmp("hostile-disk");
-    std::fs::create_dir_all(&root).unwrap();
-    let mounted = std::process::Command::new("mount")
-        .args(["-t", "tmpfs", "-o", "size=3m", "tmpfs"])
-        .arg(&root)
-        .status()
-        .is_ok_and(|s| s.success());
-    if !mounted {
-        eprintln!("SKIPPED: cannot mount a small tmpfs here (needs root)");
+    let Some(_unmount) = small_tmpfs(&root, 3) else {
         return;
-    }
-    struct Unmount(std::path::PathBuf);
-    impl Drop for Unmount {
-        fn drop(&mut self) {
-            let _ = std::process::Command::new("umount")
-                .arg("-l")
-                .arg(&self.0)
-                .status();
-        }
-    }
-    let _unmount = Unmount(root.clone());
+    };
     let s = Server::start(&root.join("data"), &[]);
     let c = client();
     let base = String::from_utf8(fixture("cone_noisy")).unwrap();
@@ -894,6 +877,93 @@ async fn a_full_disk_is_reported_and_recovered_from() {
         let name = p.to_string_lossy().to_string();
         assert!(!name.contains(".tmp"), "half-written blob left: {name}");
     }
+    drop(s);
+}
+
+/// Mount a tmpfs of `mb` MB on `root` for the life of the guard; None (with a visible skip)
+/// where mounting is not allowed.
+fn small_tmpfs(root: &std::path::Path, mb: usize) -> Option<impl Drop> {
+    std::fs::create_dir_all(root).unwrap();
+    let mounted = std::process::Command::new("mount")
+        .args(["-t", "tmpfs", "-o", &format!("size={mb}m"), "tmpfs"])
+        .arg(root)
+        .status()
+        .is_ok_and(|s| s.success());
+    if !mounted {
+        eprintln!("SKIPPED: cannot mount a small tmpfs here (needs root)");
+        return None;
+    }
+    struct Unmount(std::path::PathBuf);
+    impl Drop for Unmount {
+        fn drop(&mut self) {
+            let _ = std::process::Command::new("umount")
+                .arg("-l")
+                .arg(&self.0)
+                .status();
+        }
+    }
+    Some(Unmount(root.to_path_buf()))
+}
+
+/// Item 3, "jobs retried when space returns": a job whose results find the disk full (filled
+/// while it runs) goes back to the queue, its partial results deleted and its attempt not
+/// counted; the worker does not claim it again at once; once space is freed the job runs
+/// again and succeeds, with all its results.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_job_whose_results_find_the_disk_full_runs_when_space_returns() {
+    use std::io::Write;
+    let root = tmp("hostile-disk-job");
+    let Some(_unmount) = small_tmpfs(&root, 16) else {
+        return;
+    };
+    let s = Server::start(&root.join("data"), &["--workers", "1"]);
+    let c = client();
+    let mesh = upload(&c, &s, slow_obj()).await;
+    // ~2.7 s on the 2-core VM, 7.6 MB of results.
+    let params = json!({"tolerance": 1e-300, "max_iterations": 1000});
+    let j = submit(
+        &c,
+        &s,
+        json!({"kind": "flatten", "mesh_id": mesh["id"], "params": params}),
+    )
+    .await;
+    let id = j["id"].as_str().unwrap();
+    wait_for(&c, &s, id, &["running"]).await;
+    // Fill the disk, then leave 1 MB: room for the index, not for the results.
+    let filler = root.join("filler");
+    let mut f = std::fs::File::create(&filler).unwrap();
+    let chunk = vec![7u8; 64 << 10];
+    let mut written = 0u64;
+    while f.write_all(&chunk).is_ok() {
+        written += chunk.len() as u64;
+    }
+    drop(f);
+    let _ = std::fs::OpenOptions::new()
+        .write(true)
+        .open(&filler)
+        .and_then(|f| f.set_len(written.saturating_sub(1 << 20)));
+    let back = wait_for(&c, &s, id, &["queued", "succeeded", "failed"]).await;
+    assert_eq!(back["status"], "queued", "{back}");
+    let results = root.join("data").join("blobs").join("jobs").join(id);
+    if results.exists() {
+        assert!(
+            files_in(&results).is_empty(),
+            "partial results kept: {:?}",
+            files_in(&results)
+        );
+    }
+    // Still queued a while later: not spun through the full disk.
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    assert_eq!(job(&c, &s, id).await["status"], "queued");
+    std::fs::remove_file(&filler).unwrap();
+    let end = wait_for(&c, &s, id, &["succeeded", "failed"]).await;
+    assert_eq!(end["status"], "succeeded", "{end}");
+    assert_eq!(end["attempts"], 1, "{end}");
+    let svg = download(&c, &s, &format!("/v1/jobs/{id}/patterns?format=svg")).await;
+    assert!(
+        svg.starts_with(b"<?xml") || svg.starts_with(b"<svg"),
+        "patterns lost"
+    );
     drop(s);
 }
 

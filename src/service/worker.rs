@@ -76,10 +76,27 @@ pub struct Executor {
     metrics: Arc<Metrics>,
     /// Run times learnt from this process's jobs (for `Retry-After`).
     pub eta: super::eta::Eta,
+    /// Set when a job could not store its results for lack of space: claims wait until
+    /// then, and probe the storage ([`Executor::room_for_results`]).
+    room: Mutex<RoomWait>,
 }
 
 /// How often an idle claim loop looks for work queued by another process.
 const POLL: Duration = Duration::from_millis(200);
+
+/// How long claims wait after a job found the storage full: doubled from the first to the
+/// last each time another job does before one stores its results, so that a disk with room
+/// for a probe but not for the results is not worked against in a loop.
+const ROOM_WAIT: (Duration, Duration) = (Duration::from_secs(5), Duration::from_secs(300));
+
+/// The wait of [`Executor::room_for_results`].
+#[derive(Debug, Default)]
+struct RoomWait {
+    /// Claims wait until then (None: they do not wait).
+    until: Option<Instant>,
+    /// The last wait set.
+    wait: Duration,
+}
 
 /// A running job's [`Control`]: its cancel flag and its time limit. A step is not started when
 /// it would end past the deadline, its duration taken as the larger of what the algorithm
@@ -218,6 +235,7 @@ impl Executor {
             limits,
             metrics,
             eta: Default::default(),
+            room: Mutex::new(RoomWait::default()),
         });
         for k in 0..workers {
             let me = Arc::clone(&exec);
@@ -287,6 +305,53 @@ impl Executor {
     }
 
     /// Wait until woken or [`POLL`] has passed, whichever is first.
+    /// False while the storage is known to be full: a job that could not store its results
+    /// went back to the queue, and claiming it (or any other) again before space returns
+    /// would only run it to the same end. After the wait, a small probe write decides.
+    fn room_for_results(&self) -> bool {
+        let mut room = self.room.lock().unwrap_or_else(|e| e.into_inner());
+        match room.until {
+            None => true,
+            Some(t) if Instant::now() < t => false,
+            Some(_) => match super::store::has_room(&*self.store) {
+                Ok(true) => {
+                    room.until = None;
+                    tracing::info!("the storage has room again; claiming jobs");
+                    true
+                }
+                _ => {
+                    room.until = Some(Instant::now() + room.wait);
+                    false
+                }
+            },
+        }
+    }
+
+    /// A job whose results found the storage full goes back to the queue (its partial
+    /// results deleted, its attempt uncounted) and this process stops claiming until space
+    /// returns. False when it could not be put back (it is then ended as failed).
+    fn requeue_for_space(&self, worker: &str, id: &str, live: &Live) -> bool {
+        if live.cancel.load(Ordering::Relaxed) {
+            return false;
+        }
+        let _ = self.store.delete_blobs(&format!("jobs/{id}"));
+        match self.store.release(worker, id) {
+            Ok(true) => {
+                let mut room = self.room.lock().unwrap_or_else(|e| e.into_inner());
+                room.wait = (room.wait * 2).clamp(ROOM_WAIT.0, ROOM_WAIT.1);
+                room.until = Some(Instant::now() + room.wait);
+                tracing::warn!(job = %id, wait = ?room.wait,
+                    "storage full: job queued again, claims wait for space");
+                true
+            }
+            Ok(false) => false,
+            Err(e) => {
+                tracing::error!(job = %id, error = %e, "cannot queue the job again");
+                false
+            }
+        }
+    }
+
     fn wait_for_work(&self, seen: u64) -> u64 {
         let (m, cv) = &self.wake;
         let g = m.lock().unwrap_or_else(|e| e.into_inner());
@@ -363,6 +428,10 @@ impl Executor {
         let worker = format!("{}/{k}", self.worker);
         let mut seen = 0;
         loop {
+            if !self.room_for_results() {
+                std::thread::sleep(POLL);
+                continue;
+            }
             match self.store.claim(&worker, now_ms(), self.lease_ms()) {
                 Ok(Some(job)) => {
                     self.metrics.set_queued(self.queued());
@@ -460,6 +529,21 @@ impl Executor {
             .pool
             .install(|| catch_unwind(AssertUnwindSafe(|| self.execute(&job, &control))));
         let seconds = start.elapsed().as_secs_f64();
+        if matches!(result, Ok(Err(ExecError::StorageFull(_))))
+            && self.requeue_for_space(worker, &id, &live)
+        {
+            self.live
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .remove(&id);
+            self.running.fetch_sub(1, Ordering::AcqRel);
+            self.metrics.set_running(self.running());
+            self.metrics.set_queued(self.queued());
+            return;
+        }
+        if matches!(result, Ok(Ok(_))) {
+            self.room.lock().unwrap_or_else(|e| e.into_inner()).wait = Duration::ZERO;
+        }
         let (status, error, artifacts, reached) = self.ending(&job, &control, result);
         job.status = status;
         job.error = error;
@@ -556,6 +640,15 @@ impl Executor {
                 None,
             ),
             Ok(Err(ExecError::Input(p))) => (Status::Failed, Some(p), vec![], None),
+            Ok(Err(ExecError::StorageFull(e))) => (
+                Status::Failed,
+                Some(JobError::new(
+                    ErrorCode::Internal,
+                    format!("{e}; the job could not be queued again: submit it again"),
+                )),
+                vec![],
+                None,
+            ),
             Err(panic) => {
                 let msg = panic_message(panic.as_ref());
                 tracing::error!(job = %job.id, panic = %msg, "job panicked");
@@ -662,6 +755,8 @@ impl Executor {
 enum ExecError {
     Algo(AlgoError),
     Input(JobError),
+    /// The storage was full: the job can run again once there is space.
+    StorageFull(String),
 }
 
 impl ExecError {
@@ -670,7 +765,10 @@ impl ExecError {
     }
     fn storage(e: StoreError) -> ExecError {
         tracing::error!(error = %e, "store error while running a job");
-        ExecError::internal(format!("storage error: {e}"))
+        match e {
+            StoreError::Full(_) => ExecError::StorageFull(e.to_string()),
+            e => ExecError::internal(format!("storage error: {e}")),
+        }
     }
 }
 

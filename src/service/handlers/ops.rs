@@ -34,18 +34,9 @@ pub async fn readyz(State(st): State<AppState>) -> ApiResult {
             .retry_after(5)
         };
         store.ping().map_err(unavailable)?;
-        // A 64 KiB write tells a full disk (or database) from one with room for at least a
-        // small upload; a full store still serves reads, downloads and deletes, so it is
-        // reported, not unready.
-        let key = format!("probe/{}", uuid::Uuid::new_v4().simple());
-        let storage_full = match store.put_blob(&key, &[0u8; 64 << 10]) {
-            Err(crate::service::store::StoreError::Full(_)) => true,
-            other => {
-                other.map_err(unavailable)?;
-                store.delete_blobs(&key).map_err(unavailable)?;
-                false
-            }
-        };
+        // A full store still serves reads, downloads and deletes, so it is reported, not
+        // unready.
+        let storage_full = !crate::service::store::has_room(&*store).map_err(unavailable)?;
         Ok((store.count_with_status(Status::Queued)?, storage_full))
     })
     .await?;

@@ -123,6 +123,7 @@ pub fn check(store: &dyn Store, open: &dyn Fn() -> Arc<dyn Store>) {
     claims_in_order_and_once(store);
     heartbeats_and_cancels(store);
     expired_leases_requeue(store);
+    released_jobs_run_again(store);
     concurrent_claims_are_exclusive(store, open);
     status_polls_follow_other_handles(store, open);
     webhook_outbox(store, open);
@@ -520,6 +521,37 @@ fn expired_leases_requeue(s: &dyn Store) {
     let again = s.claim("w3", 2_000 + 3 * LEASE, LEASE).unwrap().unwrap();
     assert_eq!((again.id.as_str(), again.attempts), ("j_c1", 2));
     c_finish(s, "w3", again);
+}
+
+/// A job released by its worker (its results found the storage full) is queued again at its
+/// place, its attempt uncounted; only its holder can release it, and not once a cancel was
+/// requested.
+fn released_jobs_run_again(s: &dyn Store) {
+    for id in ["j_r1", "j_r2"] {
+        s.insert_job(&queued(id)).unwrap();
+    }
+    let r1 = s.claim("w1", 1_000, LEASE).unwrap().unwrap();
+    assert_eq!((r1.id.as_str(), r1.attempts), ("j_r1", 1));
+    assert!(!s.release("w2", "j_r1").unwrap(), "not w2's to release");
+    assert!(s.release("w1", "j_r1").unwrap());
+    assert_eq!(status(s, "j_r1"), Status::Queued);
+    assert!(!s.release("w1", "j_r1").unwrap(), "released once");
+    assert_eq!(
+        s.heartbeat("w1", "j_r1", 1_001, LEASE, None).unwrap(),
+        Lease::Lost
+    );
+    let again = s.claim("w2", 1_002, LEASE).unwrap().unwrap();
+    assert_eq!(
+        (again.id.as_str(), again.attempts),
+        ("j_r1", 1),
+        "first in the queue again, the attempt not counted"
+    );
+    s.request_cancel("j_r1", 1_003, 9_999).unwrap();
+    assert!(!s.release("w2", "j_r1").unwrap(), "a cancel was requested");
+    c_finish(s, "w2", again);
+    let r2 = s.claim("w1", 1_004, LEASE).unwrap().unwrap();
+    assert_eq!(r2.id, "j_r2");
+    c_finish(s, "w1", r2);
 }
 
 fn concurrent_claims_are_exclusive(s: &dyn Store, open: &dyn Fn() -> Arc<dyn Store>) {

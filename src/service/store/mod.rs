@@ -58,6 +58,20 @@ pub fn delete_with_blobs(
     Ok(existed)
 }
 
+/// Whether the store has room for at least a small result: a 64 KiB probe blob is written
+/// under a unique key and deleted. `Ok(false)` when the write finds the storage full.
+pub fn has_room(blobs: &dyn Blobs) -> Result<bool, StoreError> {
+    let key = format!("probe/{}", uuid::Uuid::new_v4().simple());
+    match blobs.put_blob(&key, &[0u8; 64 << 10]) {
+        Err(StoreError::Full(_)) => Ok(false),
+        other => {
+            other?;
+            blobs.delete_blobs(&key)?;
+            Ok(true)
+        }
+    }
+}
+
 /// Whether an I/O error means the storage is full (ENOSPC, EDQUOT).
 pub fn is_full(e: &std::io::Error) -> bool {
     e.kind() == std::io::ErrorKind::StorageFull
@@ -203,6 +217,10 @@ pub trait Store: Blobs {
     /// Running jobs whose lease ran out before `now`: queued again (or cancelled, when a
     /// cancel was requested), and returned.
     fn requeue_expired(&self, now: i64, expires_at: i64) -> Result<Vec<JobRecord>, StoreError>;
+    /// Put job `id`, running under `worker`, back at its place in the queue with its attempt
+    /// uncounted (its run could not store its results: the storage was full). False when
+    /// `worker` no longer holds it or a cancel was requested (the caller then ends it).
+    fn release(&self, worker: &str, id: &str) -> Result<bool, StoreError>;
     /// How many jobs are in state `s`.
     fn count_with_status(&self, s: Status) -> Result<usize, StoreError>;
     /// Take the oldest due webhook delivery for `worker`, leased until `now + lease_ms` (a

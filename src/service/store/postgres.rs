@@ -859,6 +859,23 @@ impl Store for PgStore {
         r
     }
 
+    fn release(&self, worker: &str, id: &str) -> Result<bool, StoreError> {
+        let r = self.run(async {
+            let c = self.pool.get().await?;
+            let n = c
+                .execute(
+                    "UPDATE jobs SET status='queued', worker=NULL, lease_until=NULL, \
+                     progress=NULL, attempts=GREATEST(attempts - 1, 0) \
+                     WHERE id=$1 AND worker=$2 AND status='running' AND NOT cancel_requested",
+                    &[&id, &worker],
+                )
+                .await?;
+            Ok(n == 1)
+        });
+        self.cache.invalidate(id);
+        r
+    }
+
     fn requeue_expired(&self, now: i64, expires_at: i64) -> Result<Vec<JobRecord>, StoreError> {
         let r = self.run(async {
             let mut c = self.pool.get().await?;

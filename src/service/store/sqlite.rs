@@ -670,6 +670,17 @@ impl Store for SqliteStore {
         Ok(back)
     }
 
+    fn release(&self, worker: &str, id: &str) -> Result<bool, StoreError> {
+        let c = self.conn();
+        let n = c.execute(
+            "UPDATE jobs SET status='queued', worker=NULL, lease_until=NULL, progress=NULL, \
+             attempts=MAX(attempts - 1, 0) \
+             WHERE id=?1 AND worker=?2 AND status='running' AND cancel_requested=0",
+            params![id, worker],
+        )?;
+        Ok(n == 1)
+    }
+
     fn claim_delivery(
         &self,
         worker: &str,
