@@ -26,7 +26,7 @@ fn postgres_store_keeps_the_contract() {
     };
     let url = pg.database("contract");
     let store = PgStore::open(&url, 4).unwrap();
-    assert_eq!(store.migrations().unwrap(), [1, 2, 3, 4, 5, 6]);
+    assert_eq!(store.migrations().unwrap(), [1, 2, 3, 4, 5, 6, 7]);
     let open = || -> Arc<dyn Store> { Arc::new(PgStore::open(&url, 4).unwrap()) };
     flatmesh::service::store::contract::check(&store, &open);
     // The webhook secret: the first to ask sets it, every handle gets the same.
@@ -47,7 +47,7 @@ fn postgres_store_keeps_the_contract() {
     // Opening again applies nothing twice.
     assert_eq!(
         PgStore::open(&url, 1).unwrap().migrations().unwrap(),
-        [1, 2, 3, 4, 5, 6]
+        [1, 2, 3, 4, 5, 6, 7]
     );
 }
 
@@ -66,7 +66,7 @@ fn postgres_migrations_apply_once_under_concurrent_starts() {
         ts.into_iter().map(|t| t.join().unwrap()).collect()
     });
     for s in &stores {
-        assert_eq!(s.migrations().unwrap(), [1, 2, 3, 4, 5, 6]);
+        assert_eq!(s.migrations().unwrap(), [1, 2, 3, 4, 5, 6, 7]);
         s.ping().unwrap();
     }
 }

@@ -399,9 +399,8 @@ async fn forget_uploads(st: &AppState, stored_here: Vec<String>) -> Result<(), P
     let store = st.store.clone();
     blocking(move || {
         for id in stored_here {
-            // Another request may have been given this mesh by its hash meanwhile.
-            if !store.mesh_in_use(&id)? {
-                store.delete_mesh(&id)?;
+            // Kept when another request was given it by its hash meanwhile, or a job uses it.
+            if store.forget_mesh(&id)? {
                 store.delete_blobs(&format!("meshes/{id}"))?;
             }
         }
@@ -658,7 +657,16 @@ async fn artifact(
         // Deleted (expired, or through another replica) since the job was read: gone, not
         // lost; the job read above may have come from a status-poll cache.
         None if store.get_job(&id2)?.is_none() => Err(Problem::not_found("job", &id2)),
-        None => Err(Problem::internal("result lost")),
+        // The row without its files: a delete that freed the files but could not record
+        // itself (a full disk) and is to be retried. Gone for the client, not a server fault.
+        None => {
+            tracing::warn!(job = %id2, "a result file is missing; its job's delete did not finish?");
+            Err(Problem::new(
+                StatusCode::NOT_FOUND,
+                "not-found",
+                format!("job `{id2}` has no such file any more (its files were deleted)"),
+            ))
+        }
     })
     .await?;
     let disposition = format!("attachment; filename=\"{id}-{name}\"");

@@ -145,7 +145,14 @@ pub async fn mesh_report(
         let _slot = slot;
         let bytes = store
             .get_blob(&format!("meshes/{}", rec.id))?
-            .ok_or_else(|| Problem::internal("mesh bytes lost"))?;
+            // A delete that freed the bytes but could not record itself (a full disk).
+            .ok_or_else(|| {
+                Problem::new(
+                    StatusCode::NOT_FOUND,
+                    "not-found",
+                    format!("mesh `{}`'s bytes were deleted", rec.id),
+                )
+            })?;
         let format = io::Format::from_extension(&rec.format)
             .ok_or_else(|| Problem::internal("stored format unknown"))?;
         let (mesh, warnings) =

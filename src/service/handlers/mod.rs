@@ -74,7 +74,11 @@ async fn store_mesh(
     let field_owned = field.to_string();
     let sha256 = sha256_hex(&bytes);
     let (store, sha, who) = (st.store.clone(), sha256.clone(), tenant.0.clone());
-    if let Some(existing) = blocking(move || Ok(store.find_mesh_by_sha256(&who, &sha)?)).await? {
+    if let Some(existing) = blocking(move || {
+        Ok(store.find_mesh_by_sha256(&who, &sha, crate::service::domain::now_ms())?)
+    })
+    .await?
+    {
         return Ok((existing, false));
     }
     let slot = parse_slot(st).await?;

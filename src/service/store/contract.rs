@@ -203,11 +203,11 @@ fn meshes_index(s: &dyn Store) {
         ["m_other"]
     );
     assert_eq!(
-        s.find_mesh_by_sha256("other", &"a".repeat(64)).unwrap(),
+        s.find_mesh_by_sha256("other", &"a".repeat(64), 6).unwrap(),
         Some(other.clone())
     );
     assert!(s
-        .find_mesh_by_sha256("", &"a".repeat(64))
+        .find_mesh_by_sha256("", &"a".repeat(64), 6)
         .unwrap()
         .is_none());
     let ids = |v: Vec<MeshRecord>| v.into_iter().map(|m| m.id).collect::<Vec<_>>();
@@ -234,11 +234,13 @@ fn meshes_index(s: &dyn Store) {
     assert!(s.list_meshes("", Some((10, "m_a")), 5).unwrap().is_empty());
     // the same bytes: the tenant's oldest upload
     assert_eq!(
-        s.find_mesh_by_sha256("", &"a".repeat(64)).unwrap().unwrap(),
+        s.find_mesh_by_sha256("", &"a".repeat(64), 12)
+            .unwrap()
+            .unwrap(),
         mesh("m_a", 10, "a")
     );
     assert!(s
-        .find_mesh_by_sha256("", &"f".repeat(64))
+        .find_mesh_by_sha256("", &"f".repeat(64), 12)
         .unwrap()
         .is_none());
     assert!(s.delete_mesh("m_other").unwrap());
@@ -251,9 +253,36 @@ fn meshes_index(s: &dyn Store) {
     assert!(s.get_mesh("m_c").unwrap().is_none());
     assert!(s.delete_unused_meshes(100).unwrap().is_empty());
     assert!(s.delete_job("j_uses_a").unwrap());
+    // m_a was handed out again at 12: kept until then
+    assert!(s.delete_unused_meshes(12).unwrap().is_empty());
     assert_eq!(s.delete_unused_meshes(15).unwrap(), ["m_a"]);
     assert_eq!(s.delete_unused_meshes(100).unwrap(), ["m_b"]);
     assert!(s.list_meshes("", None, 10).unwrap().is_empty());
+    // A request takes back what it stored, unless another request was handed the mesh by
+    // its hash meanwhile or a job uses it.
+    for m in [
+        mesh("m_d", 40, "d"),
+        mesh("m_e", 40, "e"),
+        mesh("m_f", 40, "f"),
+    ] {
+        s.insert_mesh(&m).unwrap();
+    }
+    assert!(s.forget_mesh("m_d").unwrap());
+    assert!(s.get_mesh("m_d").unwrap().is_none());
+    assert!(!s.forget_mesh("m_d").unwrap(), "already gone");
+    assert!(s
+        .find_mesh_by_sha256("", &"e".repeat(64), 41)
+        .unwrap()
+        .is_some());
+    assert!(!s.forget_mesh("m_e").unwrap(), "handed out again");
+    assert!(s.get_mesh("m_e").unwrap().is_some());
+    s.insert_job(&JobRecord::queued("j_uses_f", "report", "m_f", 42))
+        .unwrap();
+    assert!(!s.forget_mesh("m_f").unwrap(), "a job uses it");
+    assert!(s.delete_job("j_uses_f").unwrap());
+    // m_e was handed out again at 41, m_f uploaded at 40
+    assert_eq!(s.delete_unused_meshes(41).unwrap(), ["m_f"]);
+    assert_eq!(s.delete_unused_meshes(42).unwrap(), ["m_e"]);
 }
 
 fn ids_of(v: Vec<MeshRecord>) -> Vec<String> {

@@ -135,15 +135,22 @@ pub trait Store: Blobs {
         after: Option<(i64, &str)>,
         limit: usize,
     ) -> Result<Vec<MeshRecord>, StoreError>;
-    /// A stored mesh with exactly these bytes (hex SHA-256), the oldest when several.
+    /// A stored mesh with exactly these bytes (hex SHA-256), the oldest when several, marked
+    /// as handed out again at `now`: its retention restarts, and the request that stored it
+    /// can no longer take it back ([`Store::forget_mesh`]).
     fn find_mesh_by_sha256(
         &self,
         tenant: &str,
         sha256: &str,
+        now: i64,
     ) -> Result<Option<MeshRecord>, StoreError>;
-    /// Delete the meshes uploaded before `before` that no job refers to (expired uploads),
-    /// each checked and deleted in one statement; their ids (their blobs are the caller's).
+    /// Delete the meshes uploaded (or last handed out again) before `before` that no job
+    /// refers to (expired uploads), each checked and deleted in one statement; their ids
+    /// (their blobs are the caller's).
     fn delete_unused_meshes(&self, before: i64) -> Result<Vec<String>, StoreError>;
+    /// Take back a mesh the calling request stored, in one statement: deleted only when it
+    /// was never handed out again by its hash and no job refers to it. Whether it was.
+    fn forget_mesh(&self, id: &str) -> Result<bool, StoreError>;
     /// Insert a job, or return the one with the same idempotency key. `seq` is assigned.
     fn insert_job(&self, j: &JobRecord) -> Result<Inserted, StoreError>;
     /// The job created with an idempotency key.

@@ -152,6 +152,7 @@ CREATE INDEX meshes_created ON meshes(created_at, id);",
         "ALTER TABLE jobs ADD COLUMN tenant TEXT NOT NULL DEFAULT '';
 ALTER TABLE meshes ADD COLUMN tenant TEXT NOT NULL DEFAULT '';",
     ),
+    (7, "ALTER TABLE meshes ADD COLUMN reused_at BIGINT;"),
 ];
 
 const JOB_COLS: &str = "seq, id, kind, mesh_id, reference_mesh_id, params, callback_url, status, \
@@ -501,16 +502,45 @@ impl Store for PgStore {
         &self,
         tenant: &str,
         sha256: &str,
+        now: i64,
     ) -> Result<Option<MeshRecord>, StoreError> {
         self.run(async {
-            Ok(self
+            let found = self
                 .select_meshes(
                     "sha256 = $1 AND tenant = $2",
                     &[&sha256, &tenant],
                     "ORDER BY created_at, id LIMIT 1",
                 )
                 .await?
-                .pop())
+                .pop();
+            if let Some(m) = &found {
+                self.pool
+                    .get()
+                    .await?
+                    .execute(
+                        "UPDATE meshes SET reused_at = GREATEST(COALESCE(reused_at, 0), $2) \
+                         WHERE id = $1",
+                        &[&m.id, &now],
+                    )
+                    .await?;
+            }
+            Ok(found)
+        })
+    }
+
+    fn forget_mesh(&self, id: &str) -> Result<bool, StoreError> {
+        self.run(async {
+            let n = self
+                .pool
+                .get()
+                .await?
+                .execute(
+                    "DELETE FROM meshes m WHERE id = $1 AND reused_at IS NULL AND NOT EXISTS \
+                     (SELECT 1 FROM jobs j WHERE j.mesh_id = m.id OR j.reference_mesh_id = m.id)",
+                    &[&id],
+                )
+                .await?;
+            Ok(n > 0)
         })
     }
 
@@ -519,7 +549,8 @@ impl Store for PgStore {
             let c = self.pool.get().await?;
             let rows = c
                 .query(
-                    "DELETE FROM meshes m WHERE created_at < $1 AND NOT EXISTS \
+                    "DELETE FROM meshes m \
+                     WHERE GREATEST(created_at, COALESCE(reused_at, 0)) < $1 AND NOT EXISTS \
                      (SELECT 1 FROM jobs j WHERE j.mesh_id = m.id OR j.reference_mesh_id = m.id) \
                      RETURNING id",
                     &[&before],

@@ -161,6 +161,7 @@ fn add_columns(conn: &Connection) -> rusqlite::Result<()> {
         ),
         ("jobs", "tenant", "tenant TEXT NOT NULL DEFAULT ''"),
         ("meshes", "tenant", "tenant TEXT NOT NULL DEFAULT ''"),
+        ("meshes", "reused_at", "reused_at INTEGER"),
     ] {
         let has: bool = conn
             .prepare(&format!(
@@ -381,20 +382,38 @@ impl Store for SqliteStore {
         &self,
         tenant: &str,
         sha256: &str,
+        now: i64,
     ) -> Result<Option<MeshRecord>, StoreError> {
-        Ok(self
+        let found = self
             .select_meshes(
                 "sha256 = ?1 AND tenant = ?2",
                 &[&sha256 as &dyn rusqlite::ToSql, &tenant],
                 "ORDER BY created_at, id LIMIT 1",
             )?
-            .pop())
+            .pop();
+        if let Some(m) = &found {
+            self.conn().execute(
+                "UPDATE meshes SET reused_at = MAX(COALESCE(reused_at, 0), ?2) WHERE id = ?1",
+                params![m.id, now],
+            )?;
+        }
+        Ok(found)
+    }
+
+    fn forget_mesh(&self, id: &str) -> Result<bool, StoreError> {
+        let n = self.conn().execute(
+            "DELETE FROM meshes AS m WHERE id = ?1 AND reused_at IS NULL AND NOT EXISTS \
+             (SELECT 1 FROM jobs j WHERE j.mesh_id = m.id OR j.reference_mesh_id = m.id)",
+            [id],
+        )?;
+        Ok(n > 0)
     }
 
     fn delete_unused_meshes(&self, before: i64) -> Result<Vec<String>, StoreError> {
         let c = self.conn();
         let mut st = c.prepare_cached(
-            "DELETE FROM meshes AS m WHERE created_at < ?1 AND NOT EXISTS \
+            "DELETE FROM meshes AS m WHERE MAX(created_at, COALESCE(reused_at, 0)) < ?1 \
+             AND NOT EXISTS \
              (SELECT 1 FROM jobs j WHERE j.mesh_id = m.id OR j.reference_mesh_id = m.id) \
              RETURNING id",
         )?;
