@@ -3,7 +3,7 @@
 //! against brute force on a sample first.
 use criterion::{criterion_group, criterion_main, Criterion};
 use flatmesh::corpus::{Family, Procedural};
-use flatmesh::spatial::{closest_point_on_triangle, TriangleBvh};
+use flatmesh::spatial::{brute_closest_d2, TriangleBvh};
 use std::hint::black_box;
 
 fn fan(n: usize) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
@@ -49,18 +49,7 @@ fn bench(c: &mut Criterion) {
         });
         let bvh = TriangleBvh::new(pos, tri);
         for q in queries.iter().step_by(97) {
-            let brute = tri
-                .iter()
-                .map(|t| {
-                    let c = closest_point_on_triangle(
-                        *q,
-                        pos[t[0] as usize],
-                        pos[t[1] as usize],
-                        pos[t[2] as usize],
-                    );
-                    (0..3).map(|k| (c[k] - q[k]).powi(2)).sum::<f64>()
-                })
-                .fold(f64::INFINITY, f64::min);
+            let brute = brute_closest_d2(*q, pos, tri);
             let d = bvh.closest(*q).1;
             assert!((d - brute).abs() <= 1e-12 * (1.0 + brute), "{d} vs {brute}");
         }

@@ -71,6 +71,24 @@ pub fn closest_point_on_triangle(p: [f64; 3], a: [f64; 3], b: [f64; 3], c: [f64;
     ]
 }
 
+/// Squared distance from `p` to the nearest of `triangles` by trying every one: the truth
+/// [`TriangleBvh`] is checked against (tests, benchmarks).
+pub fn brute_closest_d2(p: [f64; 3], positions: &[[f64; 3]], triangles: &[[u32; 3]]) -> f64 {
+    triangles
+        .iter()
+        .map(|t| {
+            let q = closest_point_on_triangle(
+                p,
+                positions[t[0] as usize],
+                positions[t[1] as usize],
+                positions[t[2] as usize],
+            );
+            let d = sub(q, p);
+            dot(d, d)
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
 fn lerp(a: [f64; 3], d: [f64; 3], t: f64) -> [f64; 3] {
     [a[0] + d[0] * t, a[1] + d[1] * t, a[2] + d[2] * t]
 }
@@ -188,19 +206,7 @@ mod tests {
         };
         for _ in 0..300 {
             let p = [rnd() * 2.0 - 0.5, rnd() * 2.0 - 0.5, rnd() - 0.5];
-            let brute = tri
-                .iter()
-                .map(|t| {
-                    let q = closest_point_on_triangle(
-                        p,
-                        pos[t[0] as usize],
-                        pos[t[1] as usize],
-                        pos[t[2] as usize],
-                    );
-                    let d = sub(q, p);
-                    dot(d, d)
-                })
-                .fold(f64::INFINITY, f64::min);
+            let brute = brute_closest_d2(p, &pos, &tri);
             let (_, d2, _) = g.closest(p);
             assert!(
                 (d2 - brute).abs() <= 1e-12 * (1.0 + brute),

@@ -8,32 +8,21 @@ use serde_json::json;
 
 /// A saddle of 2·cells² faces with normal noise (deterministic), as OBJ.
 fn noisy_saddle_obj(cells: usize) -> Vec<u8> {
-    let mut s = String::new();
     let h = 2.0 / cells as f64;
     let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-    for j in 0..=cells {
-        for i in 0..=cells {
-            let (x, y) = (i as f64 * h - 1.0, j as f64 * h - 1.0);
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            let inner = i > 0 && j > 0 && i < cells && j < cells;
-            let noise = if inner {
-                0.1 * h * ((seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5)
-            } else {
-                0.0
-            };
-            s += &format!("v {x} {y} {}\n", 0.5 * (x * x - y * y) + noise);
-        }
-    }
-    for j in 0..cells {
-        for i in 0..cells {
-            let a = j * (cells + 1) + i + 1;
-            let (b, c) = (a + 1, a + cells + 1);
-            s += &format!("f {a} {b} {}\nf {a} {} {c}\n", c + 1, c + 1);
-        }
-    }
-    s.into_bytes()
+    grid_obj(cells, cells, |i, j| {
+        let (x, y) = (i as f64 * h - 1.0, j as f64 * h - 1.0);
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        let inner = i > 0 && j > 0 && i < cells && j < cells;
+        let noise = if inner {
+            0.1 * h * ((seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5)
+        } else {
+            0.0
+        };
+        format!("{x} {y} {}", 0.5 * (x * x - y * y) + noise)
+    })
 }
 
 fn seconds_between(from: &serde_json::Value, to: &serde_json::Value) -> f64 {

@@ -41,6 +41,9 @@ use store::{PgStore, SqliteStore, Store};
 use webhook::Webhooks;
 use worker::{Executor, Limits};
 
+/// Threads for blocking work of the HTTP side (store calls, parses).
+const BLOCKING_THREADS: usize = 32;
+
 /// Run the server until SIGINT/SIGTERM. Prints `listening on http://ADDR` on stdout once
 /// the socket is bound.
 pub fn serve(cfg: Config) -> Result<(), String> {
@@ -48,6 +51,10 @@ pub fn serve(cfg: Config) -> Result<(), String> {
     let rt = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .thread_name("flatmesh-http")
+        // Store calls and parses run here; beyond this many at once they wait for a thread
+        // (each store serialises its writes anyway) instead of growing the process by a
+        // thread per waiting request (tokio's default allows 512).
+        .max_blocking_threads(BLOCKING_THREADS)
         .build()
         .map_err(|e| e.to_string())?;
     rt.block_on(serve_async(cfg))

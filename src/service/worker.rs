@@ -532,12 +532,7 @@ impl Executor {
         if matches!(result, Ok(Err(ExecError::StorageFull(_))))
             && self.requeue_for_space(worker, &id, &live)
         {
-            self.live
-                .lock()
-                .unwrap_or_else(|e| e.into_inner())
-                .remove(&id);
-            self.running.fetch_sub(1, Ordering::AcqRel);
-            self.metrics.set_running(self.running());
+            self.not_running(&id);
             self.metrics.set_queued(self.queued());
             return;
         }
@@ -564,12 +559,7 @@ impl Executor {
                     false
                 }
             };
-        self.live
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .remove(&id);
-        self.running.fetch_sub(1, Ordering::AcqRel);
-        self.metrics.set_running(self.running());
+        self.not_running(&id);
         if !recorded {
             // Deleted while running, or its lease ran out and the job is queued again: what
             // it produced is dropped (a deleted job's files go with it).
@@ -582,6 +572,16 @@ impl Executor {
         self.metrics.finished(status);
         self.metrics.job_seconds(seconds);
         tracing::info!(job = %id, status = status.as_str(), seconds, "job ended");
+    }
+
+    /// Job `id` no longer runs here.
+    fn not_running(&self, id: &str) {
+        self.live
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .remove(id);
+        self.running.fetch_sub(1, Ordering::AcqRel);
+        self.metrics.set_running(self.running());
     }
 
     /// Status, error, artifacts and outcome of a run.

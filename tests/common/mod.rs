@@ -95,15 +95,20 @@ pub fn fixture(name: &str) -> Vec<u8> {
 /// machine (the 250² saddle used before finished its 100000 iterations in about 3 s, under the
 /// two-process test's 4 s limit), short per iteration so cancels and progress come promptly.
 pub fn slow_obj() -> Vec<u8> {
-    let (nx, ny, h) = (3000usize, 3usize, 0.001);
+    let h = 0.001;
+    grid_obj(3000, 3, |i, j| {
+        let (x, y) = (i as f64 * h, j as f64 * h);
+        format!("{x:.6} {y:.6} {:.6}", 0.03 * ((x - 1.5).powi(2) - y * y))
+    })
+}
+
+/// An OBJ grid of nx × ny cells, two triangles each; `vertex(i, j)` writes the coordinates
+/// of grid point (i, j), row by row.
+pub fn grid_obj(nx: usize, ny: usize, mut vertex: impl FnMut(usize, usize) -> String) -> Vec<u8> {
     let mut s = String::new();
     for j in 0..=ny {
         for i in 0..=nx {
-            let (x, y) = (i as f64 * h, j as f64 * h);
-            s += &format!(
-                "v {x:.6} {y:.6} {:.6}\n",
-                0.03 * ((x - 1.5).powi(2) - y * y)
-            );
+            s += &format!("v {}\n", vertex(i, j));
         }
     }
     for j in 0..ny {

@@ -226,6 +226,7 @@ impl SqliteStore {
         conn.pragma_update(None, "journal_mode", "WAL")?;
         conn.pragma_update(None, "synchronous", "NORMAL")?;
         conn.busy_timeout(std::time::Duration::from_secs(5))?;
+        conn.pragma_update(None, "cache_size", -1024)?;
         conn.execute_batch(SCHEMA)?;
         add_columns(&conn)?;
         // No automatic checkpoint inside a commit (it fsyncs, ~10-40 ms on a busy disk);
@@ -235,6 +236,7 @@ impl SqliteStore {
         conn.pragma_update(None, "journal_size_limit", WAL_LIMIT as i64)?;
         let checkpointer = Connection::open(dir.join("flatmesh.sqlite3"))?;
         checkpointer.busy_timeout(std::time::Duration::from_secs(5))?;
+        checkpointer.pragma_update(None, "cache_size", -64)?;
         let mut readers = Vec::with_capacity(READERS);
         for _ in 0..READERS {
             let r = Connection::open_with_flags(
@@ -243,6 +245,7 @@ impl SqliteStore {
                     | rusqlite::OpenFlags::SQLITE_OPEN_NO_MUTEX,
             )?;
             r.busy_timeout(std::time::Duration::from_secs(5))?;
+            r.pragma_update(None, "cache_size", -256)?;
             readers.push(Mutex::new(r));
         }
         let blobs = FileBlobs::new(dir.join("blobs"));
