@@ -41,6 +41,20 @@ use store::{PgStore, SqliteStore, Store};
 use webhook::Webhooks;
 use worker::{Executor, Limits};
 
+/// How often freed heap memory is handed back to the system.
+const TRIM_EVERY: Duration = Duration::from_secs(30);
+
+/// Hand memory the allocator keeps after frees back to the system: glibc keeps freed pages
+/// of its per-thread arenas, so a server's resident size creeps up under load although what
+/// it holds does not (4 minutes into a soak: 13 MB in use, 20 MB held).
+fn return_free_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: malloc_trim only releases free memory; it is thread-safe.
+    unsafe {
+        libc::malloc_trim(0);
+    }
+}
+
 /// Threads for blocking work of the HTTP side (store calls, parses).
 const BLOCKING_THREADS: usize = 32;
 
@@ -161,6 +175,13 @@ async fn serve_async(cfg: Config) -> Result<(), String> {
                 Ok(Err(e)) => tracing::error!(error = %e, "sweep failed"),
                 _ => {}
             }
+        }
+    });
+    tokio::spawn(async {
+        let mut tick = tokio::time::interval(TRIM_EVERY);
+        loop {
+            tick.tick().await;
+            let _ = tokio::task::spawn_blocking(return_free_memory).await;
         }
     });
     let maint = st.store.clone();

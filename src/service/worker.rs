@@ -304,7 +304,6 @@ impl Executor {
         cv.notify_all();
     }
 
-    /// Wait until woken or [`POLL`] has passed, whichever is first.
     /// False while the storage is known to be full: a job that could not store its results
     /// went back to the queue, and claiming it (or any other) again before space returns
     /// would only run it to the same end. After the wait, a small probe write decides.
@@ -352,6 +351,7 @@ impl Executor {
         }
     }
 
+    /// Wait until woken or [`POLL`] has passed, whichever is first.
     fn wait_for_work(&self, seen: u64) -> u64 {
         let (m, cv) = &self.wake;
         let g = m.lock().unwrap_or_else(|e| e.into_inner());
