@@ -1107,39 +1107,3 @@ async fn unparsable_heads_get_problem_answers() {
     .await;
     assert!(ok.starts_with("HTTP/1.1 200"), "{ok}");
 }
-
-/// A delete on a full disk frees the files before the row (so that it can free space at all);
-/// when the row's delete then still fails, the row stays without its files until the delete
-/// is retried. Readers meanwhile get 404 (gone), never a 500. Simulated by removing the files.
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn rows_whose_files_were_deleted_answer_404() {
-    let dir = tmp("hostile-half-deleted");
-    let s = Server::start(&dir, &["--workers", "1"]);
-    let c = client();
-    let mesh = upload(&c, &s, fixture("cone")).await;
-    let mid = mesh["id"].as_str().unwrap();
-    let j = submit(&c, &s, json!({"kind": "report", "mesh_id": mid})).await;
-    let jid = j["id"].as_str().unwrap();
-    wait_for(&c, &s, jid, &["succeeded"]).await;
-    std::fs::remove_dir_all(dir.join("blobs").join("jobs").join(jid)).unwrap();
-    std::fs::remove_file(dir.join("blobs").join("meshes").join(mid)).unwrap();
-    let r = c
-        .get(s.url(&format!("/v1/jobs/{jid}/result")))
-        .send()
-        .await
-        .unwrap();
-    let p = problem(r, 404).await;
-    assert!(p["detail"].as_str().unwrap().contains("deleted"), "{p}");
-    let r = c
-        .get(s.url(&format!("/v1/meshes/{mid}/report")))
-        .send()
-        .await
-        .unwrap();
-    let p = problem(r, 404).await;
-    assert!(p["detail"].as_str().unwrap().contains("deleted"), "{p}");
-    // A job submitted on it fails naming the mesh, not as a server fault.
-    let j = submit(&c, &s, json!({"kind": "report", "mesh_id": mid})).await;
-    let end = wait_for(&c, &s, j["id"].as_str().unwrap(), &["failed", "succeeded"]).await;
-    assert_eq!(end["status"], "failed", "{end}");
-    assert_eq!(end["error"]["field"], "mesh_id", "{end}");
-}

@@ -718,9 +718,7 @@ impl Executor {
             .store
             .get_blob(&format!("meshes/{id}"))
             .map_err(ExecError::storage)?
-            .ok_or_else(|| {
-                ExecError::Input(JobError::invalid(field, format!("mesh `{id}` was deleted")))
-            })?;
+            .ok_or_else(|| ExecError::internal(format!("mesh `{id}` lost")))?;
         let format = io::Format::from_extension(&rec.format)
             .ok_or_else(|| ExecError::internal("stored format unknown".into()))?;
         io::load(&bytes, format)

@@ -657,16 +657,7 @@ async fn artifact(
         // Deleted (expired, or through another replica) since the job was read: gone, not
         // lost; the job read above may have come from a status-poll cache.
         None if store.get_job(&id2)?.is_none() => Err(Problem::not_found("job", &id2)),
-        // The row without its files: a delete that freed the files but could not record
-        // itself (a full disk) and is to be retried. Gone for the client, not a server fault.
-        None => {
-            tracing::warn!(job = %id2, "a result file is missing; its job's delete did not finish?");
-            Err(Problem::new(
-                StatusCode::NOT_FOUND,
-                "not-found",
-                format!("job `{id2}` has no such file any more (its files were deleted)"),
-            ))
-        }
+        None => Err(Problem::internal("result lost")),
     })
     .await?;
     let disposition = format!("attachment; filename=\"{id}-{name}\"");

@@ -145,14 +145,7 @@ pub async fn mesh_report(
         let _slot = slot;
         let bytes = store
             .get_blob(&format!("meshes/{}", rec.id))?
-            // A delete that freed the bytes but could not record itself (a full disk).
-            .ok_or_else(|| {
-                Problem::new(
-                    StatusCode::NOT_FOUND,
-                    "not-found",
-                    format!("mesh `{}`'s bytes were deleted", rec.id),
-                )
-            })?;
+            .ok_or_else(|| Problem::internal("mesh bytes lost"))?;
         let format = io::Format::from_extension(&rec.format)
             .ok_or_else(|| Problem::internal("stored format unknown"))?;
         let (mesh, warnings) =
