@@ -38,6 +38,10 @@ impl<T> ProblemAnswers<T> {
 
 /// The problem answer that replaces `head`, when `head` is one of hyper's own.
 fn replacement(head: &[u8], base: &str) -> Option<Vec<u8>> {
+    // Cheap tests first: every write of every response passes here, bodies of many MB too.
+    if head.len() > 1024 || !head.starts_with(b"HTTP/1.") || !head.ends_with(b"\r\n\r\n") {
+        return None;
+    }
     let text = std::str::from_utf8(head).ok()?;
     let end = text.find("\r\n\r\n")?;
     if end + 4 != text.len() {

@@ -152,7 +152,11 @@ impl Control for JobControl<'_> {
             return true;
         }
         let now = self.start.elapsed().as_micros().min(u64::MAX as u128 / 2) as u64;
-        let last_stretch = now.saturating_sub(self.last_check.swap(now, Ordering::Relaxed));
+        // The first check has no stretch before it to go by (loading the input is no step).
+        let last_stretch = match self.last_check.swap(now, Ordering::Relaxed) {
+            0 => 0,
+            before => now.saturating_sub(before),
+        };
         let next = (seconds.clamp(0.0, 1e9) * 1e6) as u64;
         let limit = self.limit.as_micros().min(u64::MAX as u128 / 4) as u64;
         if now.saturating_add(next.max(last_stretch)) >= limit {
@@ -330,21 +334,29 @@ impl Executor {
     /// results deleted, its attempt uncounted) and this process stops claiming until space
     /// returns. False when it could not be put back (it is then ended as failed).
     fn requeue_for_space(&self, worker: &str, id: &str, live: &Live) -> bool {
-        if live.cancel.load(Ordering::Relaxed) {
+        // A job no longer held here (its lease lost) is another worker's, files included.
+        if live.cancel.load(Ordering::Relaxed) || live.lost.load(Ordering::Relaxed) {
             return false;
         }
         let _ = self.store.delete_blobs(&format!("jobs/{id}"));
+        // Claims here wait from before the release, so no thread of this process takes the
+        // job straight back.
+        let mut room = self.room.lock().unwrap_or_else(|e| e.into_inner());
+        let (until, wait) = (room.until, room.wait);
+        room.wait = (room.wait * 2).clamp(ROOM_WAIT.0, ROOM_WAIT.1);
+        room.until = Some(Instant::now() + room.wait);
         match self.store.release(worker, id) {
             Ok(true) => {
-                let mut room = self.room.lock().unwrap_or_else(|e| e.into_inner());
-                room.wait = (room.wait * 2).clamp(ROOM_WAIT.0, ROOM_WAIT.1);
-                room.until = Some(Instant::now() + room.wait);
                 tracing::warn!(job = %id, wait = ?room.wait,
                     "storage full: job queued again, claims wait for space");
                 true
             }
-            Ok(false) => false,
+            Ok(false) => {
+                (room.until, room.wait) = (until, wait);
+                false
+            }
             Err(e) => {
+                (room.until, room.wait) = (until, wait);
                 tracing::error!(job = %id, error = %e, "cannot queue the job again");
                 false
             }

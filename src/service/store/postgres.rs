@@ -513,18 +513,23 @@ impl Store for PgStore {
                 )
                 .await?
                 .pop();
-            if let Some(m) = &found {
-                self.pool
-                    .get()
-                    .await?
-                    .execute(
-                        "UPDATE meshes SET reused_at = GREATEST(COALESCE(reused_at, 0), $2) \
-                         WHERE id = $1",
-                        &[&m.id, &now],
-                    )
-                    .await?;
-            }
-            Ok(found)
+            // Deleted since it was read: not found, so the caller stores its own copy.
+            Ok(match found {
+                Some(m) => {
+                    let marked = self
+                        .pool
+                        .get()
+                        .await?
+                        .execute(
+                            "UPDATE meshes SET reused_at = GREATEST(COALESCE(reused_at, 0), $2) \
+                             WHERE id = $1",
+                            &[&m.id, &now],
+                        )
+                        .await?;
+                    (marked == 1).then_some(m)
+                }
+                None => None,
+            })
         })
     }
 

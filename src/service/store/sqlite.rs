@@ -394,13 +394,18 @@ impl Store for SqliteStore {
                 "ORDER BY created_at, id LIMIT 1",
             )?
             .pop();
-        if let Some(m) = &found {
-            self.conn().execute(
-                "UPDATE meshes SET reused_at = MAX(COALESCE(reused_at, 0), ?2) WHERE id = ?1",
-                params![m.id, now],
-            )?;
-        }
-        Ok(found)
+        // Deleted since it was read (expired, or taken back by the request that stored it):
+        // not found, so the caller stores its own copy.
+        Ok(match found {
+            Some(m) => {
+                let marked = self.conn().execute(
+                    "UPDATE meshes SET reused_at = MAX(COALESCE(reused_at, 0), ?2) WHERE id = ?1",
+                    params![m.id, now],
+                )?;
+                (marked == 1).then_some(m)
+            }
+            None => None,
+        })
     }
 
     fn forget_mesh(&self, id: &str) -> Result<bool, StoreError> {
