@@ -21,7 +21,12 @@
 //!
 //! Writing: one POSITION, NORMAL, `_FLATTENABILITY` and COLOR_0 accessor for all vertices
 //! (and, for `perturb`, `_DISPLACEMENT`: a [`VertexScalar`]), in the mesh's vertex order, and one primitive per patch with its own indices, so that a
-//! written file reads back with the same vertex numbering and patches. glTF stores positions
+//! written file reads back with the same vertex numbering and patches. A mesh with texture
+//! coordinates (a flattened one: each corner at its point in the pattern drawing) is written
+//! with TEXCOORD_0 instead as one vertex set per patch, a vertex once per coordinate it has
+//! there; reading welds the patches back together along their seams (a real cut inside a
+//! patch stays open: OBJ keeps the exact connectivity). TEXCOORD_0 is read back into the
+//! mesh's texture coordinates (v flipped, glTF's origin being the top left). glTF stores positions
 //! as f32; use OBJ when full f64 precision matters. The JSON is built with `serde_json` and the
 //! GLB container (a 12-byte header and two padded chunks) is written here, which keeps the
 //! alignment rules in plain sight.
@@ -300,6 +305,63 @@ fn read_positions(
     Ok(out)
 }
 
+/// TEXCOORD_0 of a primitive with `nverts` vertices, v flipped back (glTF's origin is the top
+/// left). FLOAT, or normalised UNSIGNED_BYTE / UNSIGNED_SHORT as the specification allows.
+fn read_texcoords(
+    accessor: &gltf::Accessor,
+    buffers: &[&[u8]],
+    nverts: usize,
+    limits: &super::Limits,
+    already: usize,
+) -> Result<Vec<[f64; 2]>, String> {
+    use gltf::accessor::{DataType, Dimensions};
+    let a = accessor.index();
+    if accessor.dimensions() != Dimensions::Vec2 {
+        return Err(format!("accessors[{a}]: TEXCOORD_0 must be VEC2"));
+    }
+    if accessor.count() != nverts {
+        return Err(format!(
+            "accessors[{a}]: TEXCOORD_0 has {} elements for {nverts} vertices",
+            accessor.count()
+        ));
+    }
+    if already + accessor.count() > limits.max_triangles {
+        return Err(format!(
+            "more than {} texture coordinates in all",
+            limits.max_triangles
+        ));
+    }
+    let (size, norm) = match accessor.data_type() {
+        DataType::F32 => (4, 1.0),
+        DataType::U8 if accessor.normalized() => (1, 255.0),
+        DataType::U16 if accessor.normalized() => (2, 65535.0),
+        other => {
+            return Err(format!(
+                "accessors[{a}]: TEXCOORD_0 of {other:?} is not FLOAT or a normalised integer"
+            ))
+        }
+    };
+    let s = span(accessor, buffers, size, 2).map_err(|e| e.to_string())?;
+    let mut out = Vec::with_capacity(s.count);
+    for i in 0..s.count {
+        let o = i * s.stride;
+        let c = |k: usize| -> f64 {
+            let b = &s.data[o + size * k..];
+            match size {
+                4 => f64::from(f32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+                2 => f64::from(u16::from_le_bytes([b[0], b[1]])) / norm,
+                _ => f64::from(b[0]) / norm,
+            }
+        };
+        let (u, v) = (c(0), c(1));
+        if !(u.is_finite() && v.is_finite()) {
+            return Err(format!("accessors[{a}]: element {i} is not finite"));
+        }
+        out.push([u, 1.0 - v]);
+    }
+    Ok(out)
+}
+
 fn read_indices(accessor: &gltf::Accessor, buffers: &[&[u8]]) -> Result<Vec<u32>, ReadError> {
     use gltf::accessor::{DataType, Dimensions};
     let a = accessor.index();
@@ -455,6 +517,11 @@ fn assemble(
     let mut spaces: HashMap<(usize, usize), (u32, usize)> = HashMap::new();
     let mut num_spaces = 0u32;
     let mut skipped_seen: std::collections::HashSet<(usize, usize)> = Default::default();
+    // Texture coordinates: per corner, into `uv_coords`; each TEXCOORD_0 accessor read once.
+    let mut uv_coords: Vec<[f64; 2]> = Vec::new();
+    let mut uv_tris: Vec<Option<[u32; 3]>> = Vec::new();
+    let mut uv_read: HashMap<usize, u32> = HashMap::new();
+    let mut uv_problem: Option<String> = None;
 
     for inst in scene_instances(doc)? {
         let flip = det3(&inst.world) < 0.0;
@@ -547,6 +614,24 @@ fn assemble(
             }
             let patch = patch_names.len() as u32;
             patch_names.push(name);
+            let uv_base = match prim.get(&gltf::Semantic::TexCoords(0)) {
+                None => None,
+                Some(acc) => match uv_read.get(&acc.index()) {
+                    Some(&b) => Some((b, acc.count())),
+                    None => match read_texcoords(&acc, buffers, nverts, limits, uv_coords.len()) {
+                        Ok(c) => {
+                            let b = uv_coords.len() as u32;
+                            uv_coords.extend(c);
+                            uv_read.insert(acc.index(), b);
+                            Some((b, acc.count()))
+                        }
+                        Err(why) => {
+                            uv_problem.get_or_insert(format!("{where_}: {why}"));
+                            None
+                        }
+                    },
+                },
+            };
             for (t, c) in corners.chunks_exact(3).enumerate() {
                 if let Some(&bad) = c.iter().find(|&&i| i as usize >= nverts) {
                     return Err(err(format!(
@@ -560,6 +645,13 @@ fn assemble(
                 };
                 triangles.push(tri);
                 face_patch.push(patch);
+                uv_tris.push(uv_base.map(|(b, _)| {
+                    if flip {
+                        [b + c[0], b + c[2], b + c[1]]
+                    } else {
+                        [b + c[0], b + c[1], b + c[2]]
+                    }
+                }));
             }
         }
     }
@@ -575,6 +667,27 @@ fn assemble(
             ),
         ));
     }
+    let with_uv = uv_tris.iter().filter(|t| t.is_some()).count();
+    let uv = if with_uv == uv_tris.len() {
+        Some(crate::mesh::UvLayer {
+            coords: uv_coords,
+            triangles: uv_tris.into_iter().flatten().collect(),
+        })
+    } else {
+        if with_uv > 0 || uv_problem.is_some() {
+            warnings.push(Warning::new(
+                "texture_coordinates_ignored",
+                match uv_problem {
+                    Some(why) => format!("texture coordinates ignored: {why}"),
+                    None => format!(
+                        "only {with_uv} of {} triangles have texture coordinates (TEXCOORD_0); they were ignored",
+                        uv_tris.len()
+                    ),
+                },
+            ));
+        }
+        None
+    };
     let (positions, triangles) = weld_spaces(positions, &space_of_vertex, triangles, &mut warnings);
     Ok((
         RawMesh {
@@ -582,7 +695,7 @@ fn assemble(
             triangles,
             face_patch,
             patch_names,
-            uv: None,
+            uv,
         },
         warnings,
     ))
@@ -794,35 +907,40 @@ fn build(
         bin.extend_from_slice(data);
         views.len() - 1
     };
-    let f32_bytes = |vals: &mut dyn Iterator<Item = f32>| -> Vec<u8> {
-        vals.flat_map(f32::to_le_bytes).collect()
-    };
 
-    // POSITION, with min/max of the f32 values actually stored.
-    let pos32: Vec<[f32; 3]> = mesh
-        .positions()
+    // Heat map range and colours over the whole mesh.
+    let mut range = (HEATMAP_MIN, HEATMAP_MAX);
+    let varpi32: Option<Vec<f32>> = flattenability.map(|varpi| {
+        (0..n)
+            .map(|i| varpi.get(i).copied().unwrap_or(0.0))
+            .map(|x| if x.is_finite() { x as f32 } else { 0.0 })
+            .collect()
+    });
+    let colors: Option<Vec<[f32; 3]>> = flattenability.map(|varpi| {
+        let interior: Vec<f64> = (0..n)
+            .filter(|&i| conn.is_interior(i as u32))
+            .map(|i| varpi.get(i).copied().unwrap_or(0.0))
+            .collect();
+        range = heatmap_range(scale, &interior);
+        (0..n)
+            .map(|i| {
+                if conn.is_interior(i as u32) {
+                    heat_color_in(varpi.get(i).copied().unwrap_or(0.0), range)
+                } else {
+                    NON_INTERIOR_COLOR
+                }
+            })
+            .collect()
+    });
+    let scalars32: Vec<Vec<f32>> = scalars
         .iter()
-        .map(|p| p.map(|x| x as f32))
+        .map(|sc| {
+            (0..n)
+                .map(|i| sc.values.get(i).copied().unwrap_or(0.0))
+                .map(|x| if x.is_finite() { x as f32 } else { 0.0 })
+                .collect()
+        })
         .collect();
-    let mut min = [f32::INFINITY; 3];
-    let mut max = [f32::NEG_INFINITY; 3];
-    for p in &pos32 {
-        for k in 0..3 {
-            min[k] = min[k].min(p[k]);
-            max[k] = max[k].max(p[k]);
-        }
-    }
-    let v = push_view(
-        &mut bin,
-        &f32_bytes(&mut pos32.iter().flatten().copied()),
-        34962,
-    );
-    accessors.push(
-        json!({"bufferView": v, "componentType": 5126, "count": n, "type": "VEC3",
-        "min": min, "max": max}),
-    );
-    let position = accessors.len() - 1;
-
     // NORMAL: angle-weighted vertex normals; unit length is required, so vertices without a
     // normal (unreferenced) get +Z.
     let normals: Vec<[f32; 3]> = geometry::vertex_normals(mesh)
@@ -839,78 +957,82 @@ fn build(
             }
         })
         .collect();
-    let v = push_view(
-        &mut bin,
-        &f32_bytes(&mut normals.iter().flatten().copied()),
-        34962,
-    );
-    accessors.push(json!({"bufferView": v, "componentType": 5126, "count": n, "type": "VEC3"}));
-    let normal = accessors.len() - 1;
+    let pos32: Vec<[f32; 3]> = mesh
+        .positions()
+        .iter()
+        .map(|p| p.map(|x| x as f32))
+        .collect();
 
-    let mut attributes = json!({"POSITION": position, "NORMAL": normal});
-    let mut range = (HEATMAP_MIN, HEATMAP_MAX);
-    if let Some(varpi) = flattenability {
-        let values: Vec<f32> = (0..n)
-            .map(|i| varpi.get(i).copied().unwrap_or(0.0))
-            .map(|x| if x.is_finite() { x as f32 } else { 0.0 })
-            .collect();
-        let v = push_view(&mut bin, &f32_bytes(&mut values.iter().copied()), 34962);
-        accessors
-            .push(json!({"bufferView": v, "componentType": 5126, "count": n, "type": "SCALAR"}));
-        attributes["_FLATTENABILITY"] = json!(accessors.len() - 1);
-        let interior: Vec<f64> = (0..n)
-            .filter(|&i| conn.is_interior(i as u32))
-            .map(|i| varpi.get(i).copied().unwrap_or(0.0))
-            .collect();
-        range = heatmap_range(scale, &interior);
-        let colors: Vec<[f32; 3]> = (0..n)
-            .map(|i| {
-                if conn.is_interior(i as u32) {
-                    heat_color_in(varpi.get(i).copied().unwrap_or(0.0), range)
-                } else {
-                    NON_INTERIOR_COLOR
-                }
-            })
-            .collect();
-        let v = push_view(
-            &mut bin,
-            &f32_bytes(&mut colors.iter().flatten().copied()),
-            34962,
-        );
-        accessors.push(json!({"bufferView": v, "componentType": 5126, "count": n, "type": "VEC3"}));
-        attributes["COLOR_0"] = json!(accessors.len() - 1);
-    }
-
-    for sc in scalars {
-        let values: Vec<f32> = (0..n)
-            .map(|i| sc.values.get(i).copied().unwrap_or(0.0))
-            .map(|x| if x.is_finite() { x as f32 } else { 0.0 })
-            .collect();
-        let v = push_view(&mut bin, &f32_bytes(&mut values.iter().copied()), 34962);
-        accessors
-            .push(json!({"bufferView": v, "componentType": 5126, "count": n, "type": "SCALAR"}));
-        attributes[sc.attribute] = json!(accessors.len() - 1);
-    }
-
-    // One primitive per patch, all sharing the vertex accessors.
-    let mut by_patch: Vec<Vec<u32>> = vec![Vec::new(); mesh.num_patches()];
-    for (t, &p) in mesh.triangles().iter().zip(mesh.face_patch()) {
-        by_patch[p as usize].extend_from_slice(t);
-    }
     let mut primitives = Vec::new();
-    for (p, idx) in by_patch.iter().enumerate() {
-        if idx.is_empty() {
-            continue;
+    for set in vertex_sets(mesh) {
+        let m = set.vertices.len();
+        let per_vertex = |f: &dyn Fn(usize) -> f32| -> Vec<u8> {
+            set.vertices
+                .iter()
+                .flat_map(|&v| f(v as usize).to_le_bytes())
+                .collect()
+        };
+        // POSITION, with min/max of the f32 values actually stored.
+        let mut min = [f32::INFINITY; 3];
+        let mut max = [f32::NEG_INFINITY; 3];
+        let mut bytes = Vec::with_capacity(12 * m);
+        for &v in &set.vertices {
+            let p = pos32[v as usize];
+            for k in 0..3 {
+                min[k] = min[k].min(p[k]);
+                max[k] = max[k].max(p[k]);
+                bytes.extend_from_slice(&p[k].to_le_bytes());
+            }
         }
-        let bytes: Vec<u8> = idx.iter().flat_map(|i| i.to_le_bytes()).collect();
-        let v = push_view(&mut bin, &bytes, 34963);
-        accessors.push(
-            json!({"bufferView": v, "componentType": 5125, "count": idx.len(), "type": "SCALAR"}),
-        );
-        primitives.push(
-            json!({"attributes": attributes.clone(), "indices": accessors.len() - 1,
-            "mode": 4, "material": 0, "extras": {"patch": mesh.patch_names()[p]}}),
-        );
+        let view = push_view(&mut bin, &bytes, 34962);
+        accessors.push(json!({"bufferView": view, "componentType": 5126, "count": m,
+            "type": "VEC3", "min": min, "max": max}));
+        let mut attributes = json!({"POSITION": accessors.len() - 1});
+        let vec3 = |data: &[[f32; 3]]| -> Vec<u8> {
+            set.vertices
+                .iter()
+                .flat_map(|&v| data[v as usize])
+                .flat_map(f32::to_le_bytes)
+                .collect()
+        };
+        let view = push_view(&mut bin, &vec3(&normals), 34962);
+        accessors.push(json!({"bufferView": view, "componentType": 5126, "count": m, "type": "VEC3"}));
+        attributes["NORMAL"] = json!(accessors.len() - 1);
+        if let (Some(values), Some(colors)) = (&varpi32, &colors) {
+            let view = push_view(&mut bin, &per_vertex(&|v| values[v]), 34962);
+            accessors.push(json!({"bufferView": view, "componentType": 5126, "count": m, "type": "SCALAR"}));
+            attributes["_FLATTENABILITY"] = json!(accessors.len() - 1);
+            let view = push_view(&mut bin, &vec3(colors), 34962);
+            accessors.push(json!({"bufferView": view, "componentType": 5126, "count": m, "type": "VEC3"}));
+            attributes["COLOR_0"] = json!(accessors.len() - 1);
+        }
+        for (sc, values) in scalars.iter().zip(&scalars32) {
+            let view = push_view(&mut bin, &per_vertex(&|v| values[v]), 34962);
+            accessors.push(json!({"bufferView": view, "componentType": 5126, "count": m, "type": "SCALAR"}));
+            attributes[sc.attribute] = json!(accessors.len() - 1);
+        }
+        if let Some(uv) = &set.uv {
+            // glTF's texture origin is the top left: v is stored as 1 − v.
+            let bytes: Vec<u8> = uv
+                .iter()
+                .flat_map(|c| [c[0] as f32, (1.0 - c[1]) as f32])
+                .flat_map(f32::to_le_bytes)
+                .collect();
+            let view = push_view(&mut bin, &bytes, 34962);
+            accessors.push(json!({"bufferView": view, "componentType": 5126, "count": m, "type": "VEC2"}));
+            attributes["TEXCOORD_0"] = json!(accessors.len() - 1);
+        }
+        for (p, idx) in &set.patches {
+            let bytes: Vec<u8> = idx.iter().flat_map(|i| i.to_le_bytes()).collect();
+            let view = push_view(&mut bin, &bytes, 34963);
+            accessors.push(
+                json!({"bufferView": view, "componentType": 5125, "count": idx.len(), "type": "SCALAR"}),
+            );
+            primitives.push(
+                json!({"attributes": attributes.clone(), "indices": accessors.len() - 1,
+                "mode": 4, "material": 0, "extras": {"patch": mesh.patch_names()[*p]}}),
+            );
+        }
     }
     while bin.len() % 4 != 0 {
         bin.push(0);
@@ -961,6 +1083,67 @@ fn build(
         "buffers": [{"byteLength": bin.len()}],
     });
     (root, bin)
+}
+
+/// The vertices written and the primitives that index them.
+struct VertexSet {
+    /// Mesh vertex of each written vertex.
+    vertices: Vec<u32>,
+    /// Texture coordinate of each written vertex.
+    uv: Option<Vec<[f64; 2]>>,
+    /// (patch, indices into `vertices`), one primitive each.
+    patches: Vec<(usize, Vec<u32>)>,
+}
+
+/// Without texture coordinates, one set of every mesh vertex in mesh order, shared by one
+/// primitive per patch (a file reads back with the same numbering). With them, one set per
+/// patch, a vertex written once per texture coordinate it has there: glTF has one texture
+/// coordinate per vertex, and the reader welds the patches back along their seams.
+fn vertex_sets(mesh: &Mesh) -> Vec<VertexSet> {
+    let mut by_patch: Vec<Vec<usize>> = vec![Vec::new(); mesh.num_patches()];
+    for (f, &p) in mesh.face_patch().iter().enumerate() {
+        by_patch[p as usize].push(f);
+    }
+    let Some(uv) = mesh.uv() else {
+        return vec![VertexSet {
+            vertices: (0..mesh.num_vertices() as u32).collect(),
+            uv: None,
+            patches: by_patch
+                .iter()
+                .enumerate()
+                .filter(|(_, fs)| !fs.is_empty())
+                .map(|(p, fs)| (p, fs.iter().flat_map(|&f| mesh.triangles()[f]).collect()))
+                .collect(),
+        }];
+    };
+    let mut sets = Vec::new();
+    for (p, faces) in by_patch.iter().enumerate() {
+        if faces.is_empty() {
+            continue;
+        }
+        let mut index: HashMap<(u32, u32), u32> = HashMap::new();
+        let mut set = VertexSet {
+            vertices: Vec::new(),
+            uv: Some(Vec::new()),
+            patches: vec![(p, Vec::with_capacity(3 * faces.len()))],
+        };
+        for &f in faces {
+            for k in 0..3 {
+                let key = (mesh.triangles()[f][k], uv.triangles[f][k]);
+                let next = set.vertices.len() as u32;
+                let i = *index.entry(key).or_insert_with(|| {
+                    set.vertices.push(key.0);
+                    if let Some(c) = set.uv.as_mut() {
+                        c.push(uv.coords[key.1 as usize]);
+                    }
+                    next
+                });
+                set.patches[0].1.push(i);
+            }
+        }
+        sets.push(set);
+    }
+    sets
 }
 
 /// Binary glTF: POSITION, NORMAL, one indexed primitive per patch (patch name in the

@@ -9,87 +9,16 @@
 use crate::pattern::Patterns;
 use std::fmt::Write;
 
-/// Millimetres per unit, for `mm`, `cm`, `dm`, `m`, `in` (None for anything else).
-pub fn mm_per(unit: &str) -> Option<f64> {
-    match unit {
-        "mm" => Some(1.0),
-        "dm" => Some(100.0),
-        "cm" => Some(10.0),
-        "m" => Some(1000.0),
-        "in" => Some(25.4),
-        _ => None,
-    }
-}
+pub use crate::pattern::mm_per;
 
 /// Drawing units per mesh unit (1 when a unit is missing or unknown).
 pub fn scale(p: &Patterns) -> f64 {
-    match (mm_per(&p.input_unit), mm_per(&p.unit)) {
-        (Some(a), Some(b)) => a / b,
-        _ => 1.0,
-    }
+    p.scale()
 }
 
-/// Placement of each piece in the drawing: drawing = uv · scale + offset. Also returns the
-/// drawing's width and height. Shelf packing by bounding boxes, tallest first, shelves no
-/// wider than max(widest piece, 1.5 √(Σ box areas)); a gap of 3 % of the mean box size.
+/// Placement of each piece in the drawing ([`Patterns::layout`]).
 pub fn layout(p: &Patterns) -> (Vec<[f64; 2]>, f64, f64) {
-    let s = scale(p);
-    let boxes: Vec<([f64; 2], [f64; 2])> = p
-        .pieces
-        .iter()
-        .map(|pc| {
-            let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
-            for q in &pc.uv {
-                for k in 0..2 {
-                    lo[k] = lo[k].min(q[k] * s);
-                    hi[k] = hi[k].max(q[k] * s);
-                }
-            }
-            if pc.uv.is_empty() {
-                ([0.0; 2], [0.0; 2])
-            } else {
-                (lo, hi)
-            }
-        })
-        .collect();
-    let n = boxes.len().max(1) as f64;
-    let mean = boxes
-        .iter()
-        .map(|(lo, hi)| ((hi[0] - lo[0]) + (hi[1] - lo[1])) / 2.0)
-        .sum::<f64>()
-        / n;
-    let gap = 0.03 * mean.max(f64::MIN_POSITIVE);
-    let area: f64 = boxes
-        .iter()
-        .map(|(lo, hi)| (hi[0] - lo[0] + gap) * (hi[1] - lo[1] + gap))
-        .sum();
-    let widest = boxes
-        .iter()
-        .map(|(lo, hi)| hi[0] - lo[0])
-        .fold(0.0, f64::max);
-    let shelf_w = widest.max(1.5 * area.sqrt());
-    let mut order: Vec<usize> = (0..boxes.len()).collect();
-    order.sort_by(|&a, &b| {
-        let ha = boxes[a].1[1] - boxes[a].0[1];
-        let hb = boxes[b].1[1] - boxes[b].0[1];
-        hb.partial_cmp(&ha).unwrap_or(std::cmp::Ordering::Equal)
-    });
-    let mut off = vec![[0.0; 2]; boxes.len()];
-    let (mut x, mut y, mut shelf_h, mut width) = (gap, gap, 0.0f64, 0.0f64);
-    for i in order {
-        let (lo, hi) = boxes[i];
-        let (w, h) = (hi[0] - lo[0], hi[1] - lo[1]);
-        if x > gap && x + w > shelf_w + gap {
-            x = gap;
-            y += shelf_h + gap;
-            shelf_h = 0.0;
-        }
-        off[i] = [x - lo[0], y - lo[1]];
-        x += w + gap;
-        width = width.max(x);
-        shelf_h = shelf_h.max(h);
-    }
-    (off, width, y + shelf_h + gap)
+    p.layout()
 }
 
 /// `patterns.json`.
@@ -126,7 +55,7 @@ pub fn to_svg(p: &Patterns) -> String {
     let _ = writeln!(
         out,
         r#"<?xml version="1.0" encoding="UTF-8"?>
-<svg xmlns="http://www.w3.org/2000/svg" width="{wu}{uname}" height="{hu}{uname}" viewBox="0 0 {w} {h}">
+<svg xmlns="http://www.w3.org/2000/svg" width="{wu}{uname}" height="{hu}{uname}" viewBox="0 0 {w} {h}" font-family="DejaVu Sans, Arial, Helvetica, sans-serif">
 <!-- flatmesh patterns: 1 user unit = 1 {u}; mesh unit {iu} -->"#,
         u = esc(&p.unit),
         iu = esc(&p.input_unit)
@@ -154,15 +83,72 @@ pub fn to_svg(p: &Patterns) -> String {
                 stroke * 0.4
             );
         }
-        for lp in &pc.boundary_loops {
-            let mut d = String::new();
-            for (k, &v) in lp.iter().enumerate() {
-                let (x, y) = pt(i, pc.uv[v as usize]);
-                let _ = write!(d, "{}{} {}", if k == 0 { "M" } else { "L" }, x, y);
-            }
+        // Cut line solid; the sew line dashed inside it (solid when there is no cut line).
+        for lp in &pc.cut_lines {
+            let d = path_of(lp.iter().map(|&q| pt(i, q)));
             let _ = writeln!(
                 out,
-                r##"<path d="{d}Z" fill="none" stroke="#000" stroke-width="{stroke}"/>"##
+                r##"<path class="cut" d="{d}Z" fill="none" stroke="#000" stroke-width="{stroke}"/>"##
+            );
+        }
+        let dash = if pc.cut_lines.is_empty() {
+            String::new()
+        } else {
+            format!(r#" stroke-dasharray="{} {}""#, stroke * 8.0, stroke * 4.0)
+        };
+        for lp in &pc.boundary_loops {
+            let d = path_of(lp.iter().map(|&v| pt(i, pc.uv[v as usize])));
+            let _ = writeln!(
+                out,
+                r##"<path class="sew" d="{d}Z" fill="none" stroke="#000" stroke-width="{}"{dash}/>"##,
+                stroke * 0.7
+            );
+        }
+        // Notches: across the allowance, from the cut line to the sew line (a short tick into
+        // the piece when there is no allowance).
+        let mut d = String::new();
+        for n in &pc.notches {
+            let a = pt(i, n.cut_at);
+            let b = if n.cut_at == n.at {
+                let q = [
+                    n.at[0] + n.inward[0] * font / s,
+                    n.at[1] + n.inward[1] * font / s,
+                ];
+                pt(i, q)
+            } else {
+                pt(i, n.at)
+            };
+            let _ = write!(d, "M{} {}L{} {}", a.0, a.1, b.0, b.1);
+        }
+        if !d.is_empty() {
+            let _ = writeln!(
+                out,
+                r##"<path class="notches" d="{d}" fill="none" stroke="#c00" stroke-width="{}"/>"##,
+                stroke * 1.5
+            );
+        }
+        if let Some([a, b]) = pc.grain {
+            let (a, b) = (pt(i, a), pt(i, b));
+            let h = font * 0.6;
+            let _ = writeln!(
+                out,
+                r##"<path class="grain" d="M{} {}L{} {}M{} {}L{} {}L{} {}M{} {}L{} {}L{} {}" fill="none" stroke="#06c" stroke-width="{stroke}"/>"##,
+                a.0,
+                a.1,
+                b.0,
+                b.1,
+                b.0 - h * 0.5,
+                b.1 + h,
+                b.0,
+                b.1,
+                b.0 + h * 0.5,
+                b.1 + h,
+                a.0 - h * 0.5,
+                a.1 - h,
+                a.0,
+                a.1,
+                a.0 + h * 0.5,
+                a.1 - h
             );
         }
         if let Some(c) = centroid(&pc.uv) {
@@ -196,6 +182,15 @@ pub fn to_svg(p: &Patterns) -> String {
     }
     let _ = writeln!(out, "</g>\n</svg>");
     out
+}
+
+/// An SVG path's `M x y L x y …` through the points.
+fn path_of(points: impl Iterator<Item = (f64, f64)>) -> String {
+    let mut d = String::new();
+    for (k, (x, y)) in points.enumerate() {
+        let _ = write!(d, "{}{} {}", if k == 0 { "M" } else { "L" }, x, y);
+    }
+    d
 }
 
 fn centroid(uv: &[[f64; 2]]) -> Option<[f64; 2]> {

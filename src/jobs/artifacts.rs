@@ -35,6 +35,10 @@ pub fn derive_patterns(outcome: &mut JobOutcome, control: &dyn Control) -> Resul
     }
     match flatten::run(mesh, &flatten::Params::default(), control) {
         Ok(flat) => {
+            // The same mesh, with the pattern's texture coordinates.
+            if let Some(m) = flat.mesh {
+                outcome.mesh = Some(m);
+            }
             outcome.patterns = flat.patterns;
             outcome.pattern_warnings = flat.summary.job_warnings;
             Ok(())

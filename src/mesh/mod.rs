@@ -268,30 +268,13 @@ impl Mesh {
             }
         }
         if let Some(uv) = &uv {
-            if uv.triangles.len() != triangles.len() {
-                return Err(MeshError::Inconsistent {
-                    what: format!(
-                        "{} texture triangles for {} faces",
-                        uv.triangles.len(),
-                        triangles.len()
-                    ),
-                });
-            }
-            if let Some((f, _)) = uv
-                .triangles
-                .iter()
-                .enumerate()
-                .find(|(_, t)| t.iter().any(|&i| i as usize >= uv.coords.len()))
-            {
-                return Err(MeshError::Inconsistent {
-                    what: format!("face {f} refers to a texture coordinate that does not exist"),
-                });
-            }
+            check_uv(uv, triangles.len())?;
         }
         check_finite(&positions)?;
         check_faces(&positions, &triangles)?;
         let mut warnings = Vec::new();
         compact_patches(&mut face_patch, &mut patch_names, &mut warnings);
+        let before = uv.as_ref().map(|_| triangles.clone());
         let conn = Connectivity::build(
             nv,
             &mut triangles,
@@ -299,6 +282,16 @@ impl Mesh {
             patch_names.len(),
             &mut warnings,
         )?;
+        // A face whose orientation was repaired has its corners 1 and 2 swapped: its texture
+        // corners follow.
+        let mut uv = uv;
+        if let (Some(uv), Some(before)) = (uv.as_mut(), before) {
+            for ((t, b), u) in triangles.iter().zip(&before).zip(&mut uv.triangles) {
+                if t != b {
+                    u.swap(1, 2);
+                }
+            }
+        }
         let mesh = Mesh {
             positions,
             triangles: Arc::new(triangles),
@@ -326,6 +319,17 @@ impl Mesh {
         check_faces(&positions, &self.triangles)?;
         Ok(Mesh {
             positions,
+            ..self.clone_shallow()
+        })
+    }
+
+    /// The same mesh with texture coordinates (replacing any it had). Fails when the layer
+    /// does not have one triangle per face, refers past its coordinates, or is not finite.
+    pub fn with_uv(&self, uv: UvLayer) -> Result<Mesh, MeshError> {
+        check_uv(&uv, self.triangles.len())?;
+        Ok(Mesh {
+            positions: self.positions.clone(),
+            uv: Some(Arc::new(uv)),
             ..self.clone_shallow()
         })
     }
@@ -450,6 +454,31 @@ fn compact_patches(
 }
 
 /// Bounding box of a set of points (`[+inf; 3], [-inf; 3]` when empty).
+fn check_uv(uv: &UvLayer, faces: usize) -> Result<(), MeshError> {
+    if uv.triangles.len() != faces {
+        return Err(MeshError::Inconsistent {
+            what: format!("{} texture triangles for {faces} faces", uv.triangles.len()),
+        });
+    }
+    if let Some((f, _)) = uv
+        .triangles
+        .iter()
+        .enumerate()
+        .find(|(_, t)| t.iter().any(|&i| i as usize >= uv.coords.len()))
+    {
+        return Err(MeshError::Inconsistent {
+            what: format!("face {f} refers to a texture coordinate that does not exist"),
+        });
+    }
+    if let Some(k) = uv.coords.iter().position(|c| !(c[0].is_finite() && c[1].is_finite())) {
+        return Err(MeshError::Inconsistent {
+            what: format!("texture coordinate {k} is not finite"),
+        });
+    }
+    Ok(())
+}
+
+/// The bounding box of points.
 pub fn bbox_of(points: impl Iterator<Item = [f64; 3]>) -> ([f64; 3], [f64; 3]) {
     let mut lo = [f64::INFINITY; 3];
     let mut hi = [f64::NEG_INFINITY; 3];

@@ -38,6 +38,7 @@
 //! DXF drawings are scaled to `unit` (default `mm`).
 
 pub mod cut;
+pub mod finish;
 pub mod lpfb;
 pub mod measures;
 pub mod param;
@@ -80,6 +81,13 @@ pub enum Unit {
 }
 
 impl Unit {
+    /// The unit of a name as written in files.
+    pub fn parse(name: &str) -> Option<Unit> {
+        [Unit::Mm, Unit::Cm, Unit::Dm, Unit::M, Unit::In]
+            .into_iter()
+            .find(|u| u.name() == name)
+    }
+
     /// The unit's name as written in files.
     pub fn name(self) -> &'static str {
         match self {
@@ -153,6 +161,14 @@ fn default_max_iterations() -> usize {
 fn default_tolerance() -> f64 {
     1e-5
 }
+fn default_mitre_limit() -> f64 {
+    3.0
+}
+
+/// Seam allowance when none is given, in millimetres.
+pub const DEFAULT_SEAM_ALLOWANCE_MM: f64 = 10.0;
+/// Arc length between notches when none is given, in millimetres.
+pub const DEFAULT_NOTCH_SPACING_MM: f64 = 50.0;
 
 /// Parameters of `flatten`; unknown keys are refused.
 #[derive(Debug, Clone, Deserialize, Serialize)]
@@ -190,6 +206,32 @@ pub struct Params {
     /// Draw the triangles in the SVG as well as the outlines.
     #[serde(default)]
     pub svg_triangles: bool,
+    /// Seam allowance in the drawing unit (default 10 mm); 0 draws no cut line.
+    #[serde(default)]
+    pub seam_allowance: Option<f64>,
+    /// Allowance on free boundary edges (hems, necklines), in the drawing unit (default: the
+    /// seam allowance).
+    #[serde(default)]
+    pub hem_allowance: Option<f64>,
+    /// Allowances for the seams between two named pieces (the same name twice: that piece's
+    /// real cuts), in the drawing unit.
+    #[serde(default)]
+    pub seam_allowances: Vec<finish::SeamAllowance>,
+    /// Cut-line corners: `mitre` (default) or `square`.
+    #[serde(default)]
+    pub corners: finish::Corners,
+    /// A mitred corner reaching further than this many allowances from its sew-line corner is
+    /// squared off there (3).
+    #[serde(default = "default_mitre_limit")]
+    pub mitre_limit: f64,
+    /// Arc length between notches along a seam, in the drawing unit (default 50 mm; 0: at the
+    /// seam ends only).
+    #[serde(default)]
+    pub notch_spacing: Option<f64>,
+    /// Grain: `up` (default: the mesh's +Y axis), `principal` (each piece's longest axis),
+    /// `none` (pieces as flattened), or a 3D direction `[x, y, z]`.
+    #[serde(default)]
+    pub grain: finish::Grain,
 }
 
 impl Default for Params {
@@ -205,6 +247,13 @@ impl Default for Params {
             max_iterations: default_max_iterations(),
             tolerance: default_tolerance(),
             svg_triangles: false,
+            seam_allowance: None,
+            hem_allowance: None,
+            seam_allowances: Vec::new(),
+            corners: finish::Corners::Mitre,
+            mitre_limit: default_mitre_limit(),
+            notch_spacing: None,
+            grain: finish::Grain::Up,
         }
     }
 }
@@ -230,7 +279,73 @@ impl Params {
                 message: format!("must be in (0, 1), got {}", self.tolerance),
             });
         }
+        let mm = crate::pattern::mm_per(self.unit.name()).unwrap_or(1.0);
+        let unit = self.unit.name();
+        let length = |key: &str, v: Option<f64>, min_mm: f64| -> Result<(), AlgoError> {
+            match v {
+                Some(x) if !(x.is_finite() && x >= 0.0 && x * mm <= 1000.0) => {
+                    Err(AlgoError::InvalidParam {
+                        key: key.into(),
+                        message: format!("must be in 0..={} {unit}, got {x}", 1000.0 / mm),
+                    })
+                }
+                Some(x) if x > 0.0 && x * mm < min_mm => Err(AlgoError::InvalidParam {
+                    key: key.into(),
+                    message: format!("must be 0 or at least {} {unit}, got {x}", min_mm / mm),
+                }),
+                _ => Ok(()),
+            }
+        };
+        length("seam_allowance", self.seam_allowance, 0.0)?;
+        length("hem_allowance", self.hem_allowance, 0.0)?;
+        length("notch_spacing", self.notch_spacing, 1.0)?;
+        for (k, o) in self.seam_allowances.iter().enumerate() {
+            length(&format!("seam_allowances[{k}].allowance"), Some(o.allowance), 0.0)?;
+        }
+        if !(self.mitre_limit >= 1.0 && self.mitre_limit <= 100.0) {
+            return Err(AlgoError::InvalidParam {
+                key: "mitre_limit".into(),
+                message: format!("must be in 1..=100, got {}", self.mitre_limit),
+            });
+        }
+        if let finish::Grain::Direction(g) = self.grain {
+            let l = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
+            if !(l.is_finite() && l > 0.0) {
+                return Err(AlgoError::InvalidParam {
+                    key: "grain".into(),
+                    message: format!("must be a finite, non-zero direction, got {g:?}"),
+                });
+            }
+        }
         Ok(())
+    }
+
+    /// Grain, notches and allowances in mesh units for a mesh in `input_unit`.
+    pub fn finish(&self, input_unit: Unit) -> finish::Finish {
+        let mm = crate::pattern::mm_per(self.unit.name()).unwrap_or(1.0);
+        // mesh units per drawing unit
+        let k = mm / crate::pattern::mm_per(input_unit.name()).unwrap_or(1.0);
+        let seam = self
+            .seam_allowance
+            .unwrap_or(DEFAULT_SEAM_ALLOWANCE_MM / mm);
+        finish::Finish {
+            seam_allowance: seam * k,
+            hem_allowance: self.hem_allowance.unwrap_or(seam) * k,
+            overrides: self
+                .seam_allowances
+                .iter()
+                .map(|o| (o.patches.clone(), o.allowance * k))
+                .collect(),
+            mitre_limit: match self.corners {
+                finish::Corners::Mitre => self.mitre_limit,
+                finish::Corners::Square => 1.0,
+            },
+            notch_spacing: self
+                .notch_spacing
+                .unwrap_or(DEFAULT_NOTCH_SPACING_MM / mm)
+                * k,
+            grain: self.grain,
+        }
     }
 }
 
@@ -541,6 +656,7 @@ pub fn flatten_piece(
         perimeter,
         measures: mv,
         faces: p.faces.clone(),
+        ..Piece::default()
     };
     Ok((piece, info))
 }
@@ -1008,15 +1124,25 @@ pub fn run(
             total_s: t0.elapsed().as_secs_f64(),
         },
     };
-    let patterns = Patterns {
+    let mut patterns = Patterns {
         pieces,
         seams,
         input_unit: input_unit.name().to_string(),
         unit: params.unit.name().to_string(),
         svg_triangles: params.svg_triangles,
     };
+    let finish_warnings = finish::apply(
+        &mut patterns,
+        mesh.positions(),
+        &params.finish(input_unit),
+    );
+    let mut summary = summary;
+    summary.job_warnings.extend(finish_warnings);
+    let mesh = patterns
+        .uv_layer(mesh.num_faces())
+        .and_then(|uv| mesh.with_uv(uv).ok());
     Ok(Outcome {
-        mesh: None,
+        mesh,
         patterns: Some(patterns),
         summary,
         levels: Vec::new(),

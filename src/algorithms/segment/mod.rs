@@ -453,8 +453,21 @@ pub fn run(
     };
     let hausdorff_to_input = super::Distance::hausdorff(&cut_mesh, input);
     let mut flat = flatten::run(&cut_mesh, &final_flatten, control)?;
+    let mut cut_mesh = cut_mesh;
     if let Some(patterns) = flat.patterns.as_mut() {
         seams_on_input(mesh, patterns, &vertex_map, &dangling);
+        // Notches and allowances again, now that the pieces have their seams.
+        let unit = Unit::parse(&patterns.input_unit).unwrap_or_default();
+        let warnings =
+            flatten::finish::apply(patterns, cut_mesh.positions(), &final_flatten.finish(unit));
+        flat.summary.job_warnings.extend(warnings);
+        let mut seen = HashSet::new();
+        flat.summary.job_warnings.retain(|w| seen.insert(w.clone()));
+        if let Some(uv) = patterns.uv_layer(cut_mesh.num_faces()) {
+            if let Ok(m) = cut_mesh.with_uv(uv) {
+                cut_mesh = m;
+            }
+        }
         flat.summary.seams = patterns
             .seams
             .iter()

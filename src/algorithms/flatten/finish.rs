@@ -1,0 +1,670 @@
+//! Cut-ready pieces: grain line, notches and seam allowance on flattened pieces.
+//!
+//! - **Grain** ([`Grain`]): each piece is rotated in its plane so that the grain runs along the
+//!   drawing's +y axis. For a 3D direction g (default the mesh's up axis, +Y), the direction in
+//!   the piece is the area-weighted image of g's tangential part under each triangle's linear
+//!   map 3D → 2D; where g is nearly normal to the piece that image means nothing and the
+//!   piece's principal axis is used instead (said in a warning). The grain line is drawn
+//!   through the piece's area centroid, half the piece's height long.
+//! - **Notches**: both sides of a seam are walked in the same direction from the same end,
+//!   matched by their 3D positions; notches sit at both ends and every `notch_spacing` of 3D
+//!   arc length, each as (boundary edge, t) on each side. The same (edge, t) on both sides is
+//!   the same 3D point, whatever the flattening did to the lengths (LSCM does not keep them).
+//! - **Seam allowance**: the cut line bounds the union of the piece, a rectangle of the edge's
+//!   allowance outside each sew-line edge, and a join at each convex corner: a mitre where the
+//!   two offset lines meet, squared off at `mitre_limit` × allowance from the corner
+//!   (`corners = square` is a limit of 1). The allowance is per edge (a seam's override by its
+//!   patch pair, or the hem allowance on free boundary), which a uniform offset cannot do. The
+//!   union is Clipper2's (the `clipper2-rust` port) in 64-bit integers scaled so the piece
+//!   spans 2⁴² units: a straight edge's cut line lies at its allowance to ~1e-12 of the piece's
+//!   size (i_overlay works on a 32-bit grid, ~1e-9). The result is a set of simple polygons.
+
+use crate::pattern::{Notch, Patterns, Piece};
+use clipper2_rust::{FillRule, Path64, Paths64, Point64};
+use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
+
+/// Most notches on one seam: a spacing that would put more is widened.
+pub const MAX_NOTCHES_PER_SEAM: f64 = 10_000.0;
+
+/// How the grain is chosen.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum Grain {
+    /// The mesh's up axis (+Y, glTF's convention).
+    #[default]
+    Up,
+    /// The piece's own longest axis (principal axis of its area).
+    Principal,
+    /// Leave pieces as flattened, with no grain line.
+    None,
+    /// A 3D direction in mesh coordinates.
+    Direction([f64; 3]),
+}
+
+impl Serialize for Grain {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            Grain::Up => s.serialize_str("up"),
+            Grain::Principal => s.serialize_str("principal"),
+            Grain::None => s.serialize_str("none"),
+            Grain::Direction(d) => d.serialize(s),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for Grain {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        use serde::de::Error;
+        let v = serde_json::Value::deserialize(d)?;
+        match &v {
+            serde_json::Value::String(s) => match s.as_str() {
+                "up" => Ok(Grain::Up),
+                "principal" => Ok(Grain::Principal),
+                "none" => Ok(Grain::None),
+                _ => Err(D::Error::custom(format!(
+                    "unknown grain `{s}`: expected `up`, `principal`, `none` or a 3D direction [x, y, z]"
+                ))),
+            },
+            _ => {
+                let a: [f64; 3] = serde_json::from_value(v).map_err(|_| {
+                    D::Error::custom(
+                        "expected `up`, `principal`, `none` or a 3D direction [x, y, z]",
+                    )
+                })?;
+                Ok(Grain::Direction(a))
+            }
+        }
+    }
+}
+
+/// Corner style of the cut line.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Corners {
+    /// Offset lines meet at a point, squared off past `mitre_limit` × allowance.
+    #[default]
+    Mitre,
+    /// Every convex corner squared off at the allowance.
+    Square,
+}
+
+/// A seam allowance for the seams between two patches (the same name twice: the real cuts of
+/// that piece).
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SeamAllowance {
+    /// The two pieces' names, in either order.
+    pub patches: [String; 2],
+    /// Allowance in the drawing unit.
+    pub allowance: f64,
+}
+
+/// What [`apply`] does, lengths in mesh units.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Finish {
+    /// Allowance of a seam without an override.
+    pub seam_allowance: f64,
+    /// Allowance of free boundary edges (hems, necklines).
+    pub hem_allowance: f64,
+    /// Per patch pair.
+    pub overrides: Vec<([String; 2], f64)>,
+    /// Largest distance of a corner of the cut line from its sew-line corner, in allowances.
+    pub mitre_limit: f64,
+    /// Arc length between notches along a seam; 0 puts them at the ends only.
+    pub notch_spacing: f64,
+    /// Grain.
+    pub grain: Grain,
+}
+
+/// Grain, notches and cut lines of every piece (what was there before is replaced, so this
+/// can run again after the seams change). `positions` are the 3D positions of the mesh the
+/// pieces' `vertex_ids` refer to. Returns warnings for what could not be done.
+pub fn apply(p: &mut Patterns, positions: &[[f64; 3]], f: &Finish) -> Vec<String> {
+    let mut warnings = Vec::new();
+    for pc in &mut p.pieces {
+        if let Some(w) = orient(pc, positions, f.grain) {
+            warnings.push(w);
+        }
+        pc.notches.clear();
+        pc.cut_lines.clear();
+    }
+    warnings.extend(notches(p, positions, f.notch_spacing));
+    let allowances = edge_allowances(p, f);
+    for (i, pc) in p.pieces.iter_mut().enumerate() {
+        let limit = f.mitre_limit.max(1.0);
+        pc.cut_lines = cut_lines(pc, &|a, b| {
+            allowances
+                .get(&(i, a.min(b), a.max(b)))
+                .copied()
+                .unwrap_or(f.hem_allowance)
+        }, limit);
+        let cut = &pc.cut_lines;
+        for n in &mut pc.notches {
+            n.cut_at = out_to(cut, n.at, [-n.inward[0], -n.inward[1]]).unwrap_or(n.at);
+        }
+    }
+    warnings
+}
+
+/// The first point where the ray from `p` along `d` crosses one of the polygons.
+fn out_to(polys: &[Vec<[f64; 2]>], p: [f64; 2], d: [f64; 2]) -> Option<[f64; 2]> {
+    let mut best: Option<f64> = None;
+    for poly in polys {
+        let n = poly.len();
+        for k in 0..n {
+            let (a, b) = (poly[k], poly[(k + 1) % n]);
+            let e = sub2(b, a);
+            let den = cross2(d, e);
+            if den.abs() < 1e-300 {
+                continue;
+            }
+            let r = sub2(a, p);
+            let s = cross2(r, e) / den;
+            let u = cross2(r, d) / den;
+            if s >= 0.0 && (0.0..=1.0).contains(&u) && best.is_none_or(|b| s < b) {
+                best = Some(s);
+            }
+        }
+    }
+    best.map(|s| [p[0] + s * d[0], p[1] + s * d[1]])
+}
+
+fn sub2(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
+    [a[0] - b[0], a[1] - b[1]]
+}
+fn dot2(a: [f64; 2], b: [f64; 2]) -> f64 {
+    a[0] * b[0] + a[1] * b[1]
+}
+fn cross2(a: [f64; 2], b: [f64; 2]) -> f64 {
+    a[0] * b[1] - a[1] * b[0]
+}
+fn len2(a: [f64; 2]) -> f64 {
+    dot2(a, a).sqrt()
+}
+fn dist3(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+/// Area-weighted centroid of the piece's triangles and their total area.
+fn centroid(pc: &Piece) -> ([f64; 2], f64) {
+    let (mut c, mut total) = ([0.0; 2], 0.0);
+    for t in &pc.triangles {
+        let [a, b, d] = t.map(|i| pc.uv[i as usize]);
+        let area = 0.5 * cross2(sub2(b, a), sub2(d, a)).abs();
+        for k in 0..2 {
+            c[k] += area * (a[k] + b[k] + d[k]) / 3.0;
+        }
+        total += area;
+    }
+    if total > 0.0 {
+        ([c[0] / total, c[1] / total], total)
+    } else {
+        (pc.uv.first().copied().unwrap_or([0.0; 2]), 0.0)
+    }
+}
+
+/// The piece's principal axis (of its area), pointing into y ≥ 0.
+fn principal_axis(pc: &Piece) -> [f64; 2] {
+    let (m, _) = centroid(pc);
+    let (mut xx, mut xy, mut yy) = (0.0, 0.0, 0.0);
+    for t in &pc.triangles {
+        let [a, b, d] = t.map(|i| pc.uv[i as usize]);
+        let area = 0.5 * cross2(sub2(b, a), sub2(d, a)).abs();
+        let c = sub2([(a[0] + b[0] + d[0]) / 3.0, (a[1] + b[1] + d[1]) / 3.0], m);
+        xx += area * c[0] * c[0];
+        xy += area * c[0] * c[1];
+        yy += area * c[1] * c[1];
+    }
+    let phi = 0.5 * (2.0 * xy).atan2(xx - yy);
+    let d = [phi.cos(), phi.sin()];
+    if d[1] < 0.0 {
+        [-d[0], -d[1]]
+    } else {
+        d
+    }
+}
+
+/// The 2D image of the 3D direction g on the piece (area-weighted), and the share of g that is
+/// tangential to it on average (0 when g is normal to the piece everywhere).
+fn image_of(pc: &Piece, positions: &[[f64; 3]], g: [f64; 3]) -> ([f64; 2], f64) {
+    let gl = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
+    let g = g.map(|x| x / gl);
+    let (mut d, mut tangential, mut total) = ([0.0; 2], 0.0, 0.0);
+    for t in &pc.triangles {
+        let [p0, p1, p2] = t.map(|i| positions[pc.vertex_ids[i as usize] as usize]);
+        let [q0, q1, q2] = t.map(|i| pc.uv[i as usize]);
+        let e1 = [p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]];
+        let e2 = [p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]];
+        let d3 = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        let (g11, g12, g22) = (d3(e1, e1), d3(e1, e2), d3(e2, e2));
+        let det = g11 * g22 - g12 * g12;
+        if det <= 0.0 {
+            continue;
+        }
+        let area = 0.5 * det.sqrt();
+        let (b1, b2) = (d3(e1, g), d3(e2, g));
+        let c1 = (g22 * b1 - g12 * b2) / det;
+        let c2 = (g11 * b2 - g12 * b1) / det;
+        let tan = [0, 1, 2].map(|k| c1 * e1[k] + c2 * e2[k]);
+        let (f1, f2) = (sub2(q1, q0), sub2(q2, q0));
+        for k in 0..2 {
+            d[k] += area * (c1 * f1[k] + c2 * f2[k]);
+        }
+        tangential += area * d3(tan, tan).sqrt();
+        total += area;
+    }
+    let share = if total > 0.0 { tangential / total } else { 0.0 };
+    (d, share)
+}
+
+/// Rotate the piece so that its grain runs along +y and set its grain line; a warning when
+/// the grain asked for could not be used on it.
+fn orient(pc: &mut Piece, positions: &[[f64; 3]], grain: Grain) -> Option<String> {
+    let g = match grain {
+        Grain::None => {
+            pc.grain = None;
+            return None;
+        }
+        Grain::Up => Some([0.0, 1.0, 0.0]),
+        Grain::Direction(g) => Some(g),
+        Grain::Principal => None,
+    };
+    let mut warning = None;
+    let dir = match g {
+        None => principal_axis(pc),
+        Some(g) => {
+            let (d, share) = image_of(pc, positions, g);
+            let l = len2(d);
+            // Below a fifth of the piece's area seeing g along it, the direction is noise.
+            if share < 0.2 || !(l > 0.0) {
+                warning = Some(format!(
+                    "piece `{}`: the grain direction lies across the piece (only {:.0} % of it \
+                     along the surface); its principal axis is used instead",
+                    pc.patch,
+                    100.0 * share
+                ));
+                principal_axis(pc)
+            } else {
+                [d[0] / l, d[1] / l]
+            }
+        }
+    };
+    let angle = std::f64::consts::FRAC_PI_2 - dir[1].atan2(dir[0]);
+    let (s, c) = angle.sin_cos();
+    let (m, _) = centroid(pc);
+    for q in &mut pc.uv {
+        let r = sub2(*q, m);
+        *q = [m[0] + c * r[0] - s * r[1], m[1] + s * r[0] + c * r[1]];
+    }
+    let (m, _) = centroid(pc);
+    let (lo, hi) = pc
+        .uv
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(lo, hi), q| (lo.min(q[1]), hi.max(q[1])));
+    let half = if hi > lo { (hi - lo) / 4.0 } else { 0.0 };
+    pc.grain = Some([[m[0], m[1] - half], [m[0], m[1] + half]]);
+    warning
+}
+
+/// A seam side's edges in walking order: the uv vertices and whether they close a loop. None
+/// when the edges do not form one simple path or loop.
+fn walk(edges: &[[u32; 2]]) -> Option<(Vec<u32>, bool)> {
+    if edges.is_empty() {
+        return None;
+    }
+    let mut at: HashMap<u32, Vec<usize>> = HashMap::new();
+    for (k, e) in edges.iter().enumerate() {
+        if e[0] == e[1] {
+            return None;
+        }
+        at.entry(e[0]).or_default().push(k);
+        at.entry(e[1]).or_default().push(k);
+    }
+    if at.values().any(|v| v.len() > 2) {
+        return None;
+    }
+    let ends: Vec<u32> = {
+        let mut v: Vec<u32> = at
+            .iter()
+            .filter(|(_, e)| e.len() == 1)
+            .map(|(&v, _)| v)
+            .collect();
+        v.sort_unstable();
+        v
+    };
+    let closed = ends.is_empty();
+    if !closed && ends.len() != 2 {
+        return None;
+    }
+    let start = if closed {
+        edges.iter().map(|e| e[0].min(e[1])).min()?
+    } else {
+        ends[0]
+    };
+    let mut used = vec![false; edges.len()];
+    let mut order = vec![start];
+    let mut v = start;
+    while let Some(&k) = at[&v].iter().find(|&&k| !used[k]) {
+        used[k] = true;
+        let e = edges[k];
+        v = if e[0] == v { e[1] } else { e[0] };
+        order.push(v);
+    }
+    if used.iter().any(|u| !u) {
+        return None;
+    }
+    if closed {
+        order.pop();
+    }
+    Some((order, closed))
+}
+
+/// Notches of every seam, pushed onto the pieces; warnings for seams that have none.
+fn notches(p: &mut Patterns, positions: &[[f64; 3]], spacing: f64) -> Vec<String> {
+    let mut warnings = Vec::new();
+    let mut out: Vec<Vec<Notch>> = vec![Vec::new(); p.pieces.len()];
+    for (s, seam) in p.seams.iter().enumerate() {
+        let pieces = seam.pieces;
+        if pieces.iter().any(|&i| i >= p.pieces.len()) {
+            continue;
+        }
+        let pos = |side: usize, v: u32| {
+            positions[p.pieces[pieces[side]].vertex_ids[v as usize] as usize]
+        };
+        let (Some((w0, closed0)), Some((mut w1, closed1))) =
+            (walk(&seam.edges[0]), walk(&seam.edges[1]))
+        else {
+            warnings.push(format!(
+                "seam S{s} ({} – {}): not one simple path on both pieces; no notches",
+                seam.patches[0], seam.patches[1]
+            ));
+            continue;
+        };
+        if closed0 != closed1 || w0.len() != w1.len() {
+            warnings.push(format!(
+                "seam S{s} ({} – {}): its two sides differ in shape; no notches",
+                seam.patches[0], seam.patches[1]
+            ));
+            continue;
+        }
+        // Side 1 walked from side 0's start, in side 0's direction (matched in 3D).
+        let n = w0.len();
+        let p0 = pos(0, w0[0]);
+        if closed0 {
+            let k = (0..n)
+                .min_by(|&a, &b| {
+                    dist3(pos(1, w1[a]), p0).total_cmp(&dist3(pos(1, w1[b]), p0))
+                })
+                .unwrap_or(0);
+            w1.rotate_left(k);
+            if n > 2 && dist3(pos(1, w1[n - 1]), pos(0, w0[1])) < dist3(pos(1, w1[1]), pos(0, w0[1])) {
+                w1[1..].reverse();
+            }
+        } else if dist3(pos(1, w1[n - 1]), p0) < dist3(pos(1, w1[0]), p0) {
+            w1.reverse();
+        }
+        let mut cum = vec![0.0];
+        for i in 0..(if closed0 { n } else { n - 1 }) {
+            let l = dist3(pos(0, w0[i]), pos(0, w0[(i + 1) % n]));
+            cum.push(cum[i] + l);
+        }
+        let total = *cum.last().unwrap_or(&0.0);
+        let tol = 1e-6 * total.max(f64::MIN_POSITIVE);
+        if (0..n).any(|i| dist3(pos(0, w0[i]), pos(1, w1[i])) > tol) {
+            warnings.push(format!(
+                "seam S{s} ({} – {}): its two sides do not meet in 3D; no notches",
+                seam.patches[0], seam.patches[1]
+            ));
+            continue;
+        }
+        let mut at = vec![0.0];
+        // Bounds the output whatever the mesh's size.
+        let spacing = spacing.max(total / MAX_NOTCHES_PER_SEAM);
+        if spacing > 0.0 {
+            let mut k = 1.0;
+            while k * spacing < total - 0.25 * spacing {
+                at.push(k * spacing);
+                k += 1.0;
+            }
+        }
+        if !closed0 {
+            at.push(total);
+        }
+        let edges = cum.len() - 1;
+        for (number, &s_at) in at.iter().enumerate() {
+            let i = cum[1..].partition_point(|&c| c < s_at).min(edges - 1);
+            let l = cum[i + 1] - cum[i];
+            let t = if l > 0.0 {
+                ((s_at - cum[i]) / l).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            for (side, w) in [&w0, &w1].into_iter().enumerate() {
+                let pc = &p.pieces[pieces[side]];
+                let edge = [w[i], w[(i + 1) % n]];
+                let (a, b) = (pc.uv[edge[0] as usize], pc.uv[edge[1] as usize]);
+                let at = [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])];
+                out[pieces[side]].push(Notch {
+                    seam: s,
+                    side,
+                    number,
+                    edge,
+                    t,
+                    at,
+                    inward: inward(pc, edge),
+                    cut_at: at,
+                });
+            }
+        }
+    }
+    for (pc, ns) in p.pieces.iter_mut().zip(out) {
+        pc.notches = ns;
+    }
+    warnings
+}
+
+/// Unit normal of a boundary edge pointing into its triangle.
+fn inward(pc: &Piece, e: [u32; 2]) -> [f64; 2] {
+    let (a, b) = (pc.uv[e[0] as usize], pc.uv[e[1] as usize]);
+    let d = sub2(b, a);
+    let l = len2(d);
+    if l <= 0.0 {
+        return [0.0, 0.0];
+    }
+    let left = [-d[1] / l, d[0] / l];
+    let third = pc
+        .triangles
+        .iter()
+        .find(|t| t.contains(&e[0]) && t.contains(&e[1]))
+        .and_then(|t| t.iter().find(|&&v| v != e[0] && v != e[1]));
+    match third {
+        Some(&c) if dot2(sub2(pc.uv[c as usize], a), left) < 0.0 => [-left[0], -left[1]],
+        _ => left,
+    }
+}
+
+/// Allowance (mesh units) of each seam edge, by (piece, lower uv vertex, higher uv vertex).
+fn edge_allowances(p: &Patterns, f: &Finish) -> HashMap<(usize, u32, u32), f64> {
+    let mut out = HashMap::new();
+    for seam in &p.seams {
+        let a = f
+            .overrides
+            .iter()
+            .find(|(pair, _)| {
+                (pair[0] == seam.patches[0] && pair[1] == seam.patches[1])
+                    || (pair[0] == seam.patches[1] && pair[1] == seam.patches[0])
+            })
+            .map_or(f.seam_allowance, |o| o.1);
+        for side in 0..2 {
+            for e in &seam.edges[side] {
+                out.insert((seam.pieces[side], e[0].min(e[1]), e[0].max(e[1])), a);
+            }
+        }
+    }
+    out
+}
+
+/// The cut line of a piece: its sew line offset outwards by each edge's allowance.
+fn cut_lines(pc: &Piece, allowance: &dyn Fn(u32, u32) -> f64, limit: f64) -> Vec<Vec<[f64; 2]>> {
+    // (polygon, whether it keeps its orientation): sew-line loops do (outer counter-clockwise,
+    // holes clockwise), rectangles and joins are made to count positively.
+    let mut shapes: Vec<(Vec<[f64; 2]>, bool)> = Vec::new();
+    let mut reach: f64 = 0.0;
+    for lp in &pc.boundary_loops {
+        let n = lp.len();
+        if n < 3 {
+            continue;
+        }
+        // Walk each loop with the piece on its left, so "outwards" is the right-hand normal.
+        let left = (0..n)
+            .filter(|&k| {
+                let e = [lp[k], lp[(k + 1) % n]];
+                let d = sub2(pc.uv[e[1] as usize], pc.uv[e[0] as usize]);
+                dot2(inward(pc, e), [-d[1], d[0]]) > 0.0
+            })
+            .count();
+        let mut lp: Vec<u32> = lp.clone();
+        if 2 * left < n {
+            lp.reverse();
+        }
+        let q = |k: usize| pc.uv[lp[k % n] as usize];
+        shapes.push(((0..n).map(q).collect(), true));
+        let mut normal = Vec::with_capacity(n);
+        let mut dist = Vec::with_capacity(n);
+        for k in 0..n {
+            let (a, b) = (q(k), q(k + 1));
+            let d = sub2(b, a);
+            let l = len2(d);
+            let nr = if l > 0.0 { [d[1] / l, -d[0] / l] } else { [0.0, 0.0] };
+            let w = allowance(lp[k], lp[(k + 1) % n]).max(0.0);
+            reach = reach.max(w);
+            normal.push(nr);
+            dist.push(w);
+            if w > 0.0 && l > 0.0 {
+                let rect = vec![
+                    a,
+                    b,
+                    [b[0] + w * nr[0], b[1] + w * nr[1]],
+                    [a[0] + w * nr[0], a[1] + w * nr[1]],
+                ];
+                shapes.push((rect, false));
+            }
+        }
+        for k in 0..n {
+            let j = (k + n - 1) % n;
+            if let Some(join) = corner(q(k), normal[j], dist[j], normal[k], dist[k], limit) {
+                shapes.push((join, false));
+            }
+        }
+    }
+    if reach <= 0.0 {
+        return Vec::new();
+    }
+    union(shapes)
+}
+
+/// The join at a convex corner v between an edge arriving with outward normal n1 at allowance
+/// d1 and one leaving with n2, d2: the mitre where the offset lines meet, cut off at
+/// `limit` × max(d1, d2) from v along the bisector. None at a reflex or straight corner.
+fn corner(v: [f64; 2], n1: [f64; 2], d1: f64, n2: [f64; 2], d2: f64, limit: f64) -> Option<Vec<[f64; 2]>> {
+    // Directions of the two edges (outward normal is the right-hand one).
+    let t1 = [-n1[1], n1[0]];
+    let t2 = [-n2[1], n2[0]];
+    let turn = cross2(t1, t2);
+    let dmax = d1.max(d2);
+    if dmax <= 0.0 || (turn <= 1e-12 && dot2(t1, t2) > 0.0) || len2(t1) == 0.0 || len2(t2) == 0.0
+    {
+        return None;
+    }
+    let p1 = [v[0] + d1 * n1[0], v[1] + d1 * n1[1]];
+    let p2 = [v[0] + d2 * n2[0], v[1] + d2 * n2[1]];
+    let sum = [n1[0] + n2[0], n1[1] + n2[1]];
+    let bisector = if len2(sum) > 1e-9 {
+        [sum[0] / len2(sum), sum[1] / len2(sum)]
+    } else {
+        t1
+    };
+    let cap = limit * dmax;
+    // Mitre point: p1 + α t1 = p2 − β t2.
+    if turn > 1e-12 {
+        let r = sub2(p2, p1);
+        let alpha = cross2(r, t2) / turn;
+        let beta = -cross2(r, t1) / turn;
+        let m = [p1[0] + alpha * t1[0], p1[1] + alpha * t1[1]];
+        if alpha >= 0.0 && beta >= 0.0 && dot2(sub2(m, v), bisector) <= cap {
+            return Some(vec![v, p1, m, p2]);
+        }
+    }
+    // Squared off where the offset lines cross the line at `cap` across the bisector.
+    let along = |p: [f64; 2], t: [f64; 2]| {
+        let tb = dot2(t, bisector);
+        if tb.abs() < 1e-12 {
+            0.0
+        } else {
+            ((cap - dot2(sub2(p, v), bisector)) / tb).max(0.0)
+        }
+    };
+    let s1 = along(p1, t1);
+    let s2 = along(p2, [-t2[0], -t2[1]]);
+    Some(vec![
+        v,
+        p1,
+        [p1[0] + s1 * t1[0], p1[1] + s1 * t1[1]],
+        [p2[0] - s2 * t2[0], p2[1] - s2 * t2[1]],
+        p2,
+    ])
+}
+
+fn signed_area(poly: &[[f64; 2]]) -> f64 {
+    let n = poly.len();
+    (0..n)
+        .map(|k| cross2(poly[k], poly[(k + 1) % n]))
+        .sum::<f64>()
+        / 2.0
+}
+
+/// Union (positive winding) of polygons, each either kept as oriented or made positive.
+/// Outer boundaries first (counter-clockwise, largest first), then holes (clockwise).
+fn union(shapes: Vec<(Vec<[f64; 2]>, bool)>) -> Vec<Vec<[f64; 2]>> {
+    let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+    for q in shapes.iter().flat_map(|s| &s.0) {
+        for k in 0..2 {
+            lo[k] = lo[k].min(q[k]);
+            hi[k] = hi[k].max(q[k]);
+        }
+    }
+    let extent = (hi[0] - lo[0]).max(hi[1] - lo[1]);
+    if !(extent > 0.0 && extent.is_finite()) {
+        return Vec::new();
+    }
+    // A power of two, so that scaling is exact.
+    let scale = 2f64.powi(42 - extent.log2().ceil() as i32);
+    let to = |q: [f64; 2]| {
+        Point64::new(
+            ((q[0] - lo[0]) * scale).round() as i64,
+            ((q[1] - lo[1]) * scale).round() as i64,
+        )
+    };
+    let from = |p: &Point64| [p.x as f64 / scale + lo[0], p.y as f64 / scale + lo[1]];
+    let paths: Paths64 = shapes
+        .iter()
+        .map(|(s, keep)| {
+            let mut path: Path64 = s.iter().map(|&q| to(q)).collect();
+            if !keep && signed_area(s) < 0.0 {
+                path.reverse();
+            }
+            path
+        })
+        .collect();
+    let result = clipper2_rust::union_subjects_64(&paths, FillRule::Positive);
+    let mut out: Vec<(f64, Vec<[f64; 2]>)> = result
+        .iter()
+        .map(|p| {
+            let poly: Vec<[f64; 2]> = p.iter().map(from).collect();
+            (signed_area(&poly), poly)
+        })
+        .filter(|(a, _)| *a != 0.0)
+        .collect();
+    out.sort_by(|a, b| (b.0 > 0.0).cmp(&(a.0 > 0.0)).then(b.0.abs().total_cmp(&a.0.abs())));
+    out.into_iter().map(|(_, p)| p).collect()
+}
