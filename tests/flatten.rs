@@ -757,7 +757,7 @@ fn exports_read_back() {
         }
     }
     // DXF: outlines come back on their own layers, in mm (input in m), placed as `layout` says
-    let dxf = pattern::to_dxf(&pat);
+    let dxf = pattern::to_dxf_plain(&pat);
     let polys = pattern::read_dxf_polylines(&dxf).unwrap();
     assert_eq!(polys.len(), 2);
     let (off, _, _) = pattern::layout(&pat);
@@ -1035,10 +1035,12 @@ fn svg_triangles_and_components_as_pieces() {
     assert_eq!(flatmesh::io::pattern::scale(&pat), 0.1);
     let svg = flatmesh::io::pattern::to_svg(&pat);
     let n_tri: usize = pat.pieces.iter().map(|p| p.triangles.len()).sum();
+    let n_cut: usize = pat.pieces.iter().map(|p| p.cut_lines.len()).sum();
+    assert_eq!(n_cut, 2, "one cut line per piece");
     assert_eq!(
         svg.matches('Z').count(),
-        n_tri + 2,
-        "one Z per triangle and per outline"
+        n_tri + 2 + n_cut,
+        "one Z per triangle, per sew line and per cut line"
     );
 }
 

@@ -45,6 +45,10 @@ pub const WELD_RELATIVE: f64 = 1e-6;
 /// The most triangles (after instancing) a file may produce; bounds memory on hostile input.
 pub const MAX_TRIANGLES: usize = 1 << 25;
 
+/// Custom attribute naming the mesh vertex each written vertex is a copy of (written when
+/// texture coordinates split vertices; read to join them again).
+pub const VERTEX_ID: &str = "_VERTEX_ID";
+
 /// ϖ at or below this is the coolest colour of the heat map (the developable tolerance).
 pub const HEATMAP_MIN: f64 = geometry::DEVELOPABLE_TOLERANCE;
 /// ϖ at or above this (radians) is the hottest colour.
@@ -522,6 +526,8 @@ fn assemble(
     let mut uv_tris: Vec<Option<[u32; 3]>> = Vec::new();
     let mut uv_read: HashMap<usize, u32> = HashMap::new();
     let mut uv_problem: Option<String> = None;
+    // `_VERTEX_ID` of every vertex, when every primitive has one (written by flatmesh).
+    let mut vertex_ids: Option<Vec<f32>> = Some(Vec::new());
 
     for inst in scene_instances(doc)? {
         let flip = det3(&inst.world) < 0.0;
@@ -556,7 +562,10 @@ fn assemble(
                         Some(&v) => v,
                         None => {
                             let local = read_positions(&pos_acc, buffers)?;
-                            warn_split_vertices(&local, &where_, &mut warnings);
+                            read_vertex_ids(&prim, buffers, local.len(), &mut vertex_ids);
+                            if vertex_ids.is_none() {
+                                warn_split_vertices(&local, &where_, &mut warnings);
+                            }
                             let base = positions.len() as u32;
                             positions
                                 .extend(local.iter().map(|&p| transform_point(&inst.world, p)));
@@ -570,6 +579,7 @@ fn assemble(
                 }
                 None => {
                     // Non-indexed: join bit-identical corners within the primitive.
+                    vertex_ids = None;
                     let local = read_positions(&pos_acc, buffers)?;
                     let base = positions.len() as u32;
                     let mut index_of: HashMap<[u32; 3], u32> = HashMap::new();
@@ -688,7 +698,21 @@ fn assemble(
         }
         None
     };
-    let (positions, triangles) = weld_spaces(positions, &space_of_vertex, triangles, &mut warnings);
+    let (positions, triangles) = match vertex_ids.and_then(|ids| by_vertex_id(&positions, &ids)) {
+        Some(new_index) => {
+            let mut joined =
+                vec![[0.0; 3]; new_index.iter().map(|&i| i as usize + 1).max().unwrap_or(0)];
+            for (v, &i) in new_index.iter().enumerate() {
+                joined[i as usize] = positions[v];
+            }
+            let triangles = triangles
+                .into_iter()
+                .map(|t| t.map(|v| new_index[v as usize]))
+                .collect();
+            (joined, triangles)
+        }
+        None => weld_spaces(positions, &space_of_vertex, triangles, &mut warnings),
+    };
     Ok((
         RawMesh {
             positions,
@@ -699,6 +723,65 @@ fn assemble(
         },
         warnings,
     ))
+}
+
+/// Append the primitive's `_VERTEX_ID` values (count `n`) to `ids`, or set `ids` to None when
+/// it has none or they cannot be read.
+fn read_vertex_ids(
+    prim: &gltf::Primitive,
+    buffers: &[&[u8]],
+    n: usize,
+    ids: &mut Option<Vec<f32>>,
+) {
+    use gltf::accessor::{DataType, Dimensions};
+    let Some(list) = ids.as_mut() else {
+        return;
+    };
+    let acc = prim.attributes().find_map(|(sem, acc)| match sem {
+        gltf::Semantic::Extras(name) if format!("_{name}") == VERTEX_ID => Some(acc),
+        _ => None,
+    });
+    let read = acc.filter(|a| {
+        a.count() == n && a.data_type() == DataType::F32 && a.dimensions() == Dimensions::Scalar
+    });
+    match read.and_then(|a| span(&a, buffers, 4, 1).ok()) {
+        Some(sp) => list.extend((0..sp.count).map(|i| {
+            let b = &sp.data[i * sp.stride..];
+            f32::from_le_bytes([b[0], b[1], b[2], b[3]])
+        })),
+        None => *ids = None,
+    }
+}
+
+/// The vertex each vertex becomes when copies with the same `_VERTEX_ID` are joined: the
+/// ids' order (the written mesh's numbering, less vertices no triangle used), when the ids
+/// are whole numbers and copies sit at the same position. None otherwise (the file is then
+/// read as any other).
+fn by_vertex_id(positions: &[[f64; 3]], ids: &[f32]) -> Option<Vec<u32>> {
+    if ids.len() != positions.len() || ids.is_empty() {
+        return None;
+    }
+    let mut first: HashMap<u32, [f64; 3]> = HashMap::with_capacity(ids.len());
+    for (&id, p) in ids.iter().zip(positions) {
+        if !(id >= 0.0 && id.fract() == 0.0 && id < 16_777_216.0) {
+            return None;
+        }
+        match first.entry(id as u32) {
+            std::collections::hash_map::Entry::Vacant(e) => {
+                e.insert(*p);
+            }
+            std::collections::hash_map::Entry::Occupied(e) if e.get() == p => {}
+            std::collections::hash_map::Entry::Occupied(_) => return None,
+        }
+    }
+    let mut distinct: Vec<u32> = first.into_keys().collect();
+    distinct.sort_unstable();
+    let rank: HashMap<u32, u32> = distinct
+        .iter()
+        .enumerate()
+        .map(|(k, &id)| (id, k as u32))
+        .collect();
+    Some(ids.iter().map(|&id| rank[&(id as u32)]).collect())
 }
 
 /// Exporters split a vertex where its normal or texture coordinate changes (flat shading, UV
@@ -964,7 +1047,16 @@ fn build(
         .collect();
 
     let mut primitives = Vec::new();
-    for set in vertex_sets(mesh) {
+    let sets = vertex_sets(mesh);
+    // Any layout but the shared one renumbers vertices: say which mesh vertex each one is.
+    let split = !(sets.len() == 1
+        && sets[0].vertices.len() == n
+        && sets[0]
+            .vertices
+            .iter()
+            .enumerate()
+            .all(|(i, &v)| v as usize == i));
+    for set in sets {
         let m = set.vertices.len();
         let per_vertex = |f: &dyn Fn(usize) -> f32| -> Vec<u8> {
             set.vertices
@@ -985,8 +1077,10 @@ fn build(
             }
         }
         let view = push_view(&mut bin, &bytes, 34962);
-        accessors.push(json!({"bufferView": view, "componentType": 5126, "count": m,
-            "type": "VEC3", "min": min, "max": max}));
+        accessors.push(
+            json!({"bufferView": view, "componentType": 5126, "count": m,
+            "type": "VEC3", "min": min, "max": max}),
+        );
         let mut attributes = json!({"POSITION": accessors.len() - 1});
         let vec3 = |data: &[[f32; 3]]| -> Vec<u8> {
             set.vertices
@@ -996,20 +1090,41 @@ fn build(
                 .collect()
         };
         let view = push_view(&mut bin, &vec3(&normals), 34962);
-        accessors.push(json!({"bufferView": view, "componentType": 5126, "count": m, "type": "VEC3"}));
+        accessors
+            .push(json!({"bufferView": view, "componentType": 5126, "count": m, "type": "VEC3"}));
         attributes["NORMAL"] = json!(accessors.len() - 1);
         if let (Some(values), Some(colors)) = (&varpi32, &colors) {
             let view = push_view(&mut bin, &per_vertex(&|v| values[v]), 34962);
-            accessors.push(json!({"bufferView": view, "componentType": 5126, "count": m, "type": "SCALAR"}));
+            accessors.push(
+                json!({"bufferView": view, "componentType": 5126, "count": m, "type": "SCALAR"}),
+            );
             attributes["_FLATTENABILITY"] = json!(accessors.len() - 1);
             let view = push_view(&mut bin, &vec3(colors), 34962);
-            accessors.push(json!({"bufferView": view, "componentType": 5126, "count": m, "type": "VEC3"}));
+            accessors.push(
+                json!({"bufferView": view, "componentType": 5126, "count": m, "type": "VEC3"}),
+            );
             attributes["COLOR_0"] = json!(accessors.len() - 1);
         }
         for (sc, values) in scalars.iter().zip(&scalars32) {
             let view = push_view(&mut bin, &per_vertex(&|v| values[v]), 34962);
-            accessors.push(json!({"bufferView": view, "componentType": 5126, "count": m, "type": "SCALAR"}));
+            accessors.push(
+                json!({"bufferView": view, "componentType": 5126, "count": m, "type": "SCALAR"}),
+            );
             attributes[sc.attribute] = json!(accessors.len() - 1);
+        }
+        if split {
+            // The mesh vertex of each written vertex (exact in f32 below 2²⁴), so that a
+            // reader can join what was split for the texture coordinates.
+            let ids: Vec<u8> = set
+                .vertices
+                .iter()
+                .flat_map(|&v| (v as f32).to_le_bytes())
+                .collect();
+            let view = push_view(&mut bin, &ids, 34962);
+            accessors.push(
+                json!({"bufferView": view, "componentType": 5126, "count": m, "type": "SCALAR"}),
+            );
+            attributes[VERTEX_ID] = json!(accessors.len() - 1);
         }
         if let Some(uv) = &set.uv {
             // glTF's texture origin is the top left: v is stored as 1 − v.
@@ -1019,7 +1134,9 @@ fn build(
                 .flat_map(f32::to_le_bytes)
                 .collect();
             let view = push_view(&mut bin, &bytes, 34962);
-            accessors.push(json!({"bufferView": view, "componentType": 5126, "count": m, "type": "VEC2"}));
+            accessors.push(
+                json!({"bufferView": view, "componentType": 5126, "count": m, "type": "VEC2"}),
+            );
             attributes["TEXCOORD_0"] = json!(accessors.len() - 1);
         }
         for (p, idx) in &set.patches {
@@ -1060,6 +1177,12 @@ fn build(
     for sc in scalars {
         asset["extras"]["flatmesh"]["attributes"][sc.attribute] = json!(sc.quantity);
     }
+    if split {
+        asset["extras"]["flatmesh"]["attributes"][VERTEX_ID] = json!(
+            "the mesh vertex each vertex is a copy of (vertices are written once per texture \
+             coordinate they have in their patch); flatmesh joins the copies when reading"
+        );
+    }
     let root = json!({
         "asset": asset,
         "scene": 0,
@@ -1095,10 +1218,11 @@ struct VertexSet {
     patches: Vec<(usize, Vec<u32>)>,
 }
 
-/// Without texture coordinates, one set of every mesh vertex in mesh order, shared by one
-/// primitive per patch (a file reads back with the same numbering). With them, one set per
-/// patch, a vertex written once per texture coordinate it has there: glTF has one texture
-/// coordinate per vertex, and the reader welds the patches back along their seams.
+/// Without texture coordinates, or with one per vertex, one set of every mesh vertex in mesh
+/// order, shared by one primitive per patch (a file reads back with the same numbering).
+/// Otherwise one set per patch, a vertex written once per texture coordinate it has there:
+/// glTF has one texture coordinate per vertex, and the reader welds the patches back along
+/// their seams.
 fn vertex_sets(mesh: &Mesh) -> Vec<VertexSet> {
     let mut by_patch: Vec<Vec<usize>> = vec![Vec::new(); mesh.num_patches()];
     for (f, &p) in mesh.face_patch().iter().enumerate() {
@@ -1116,6 +1240,30 @@ fn vertex_sets(mesh: &Mesh) -> Vec<VertexSet> {
                 .collect(),
         }];
     };
+    // Every vertex with one texture coordinate (by value): the shared layout still fits.
+    let mut per_vertex: Vec<Option<[f64; 2]>> = vec![None; mesh.num_vertices()];
+    let mut single = true;
+    for (t, ut) in mesh.triangles().iter().zip(&uv.triangles) {
+        for k in 0..3 {
+            let c = uv.coords[ut[k] as usize];
+            match per_vertex[t[k] as usize] {
+                None => per_vertex[t[k] as usize] = Some(c),
+                Some(d) => single &= d == c,
+            }
+        }
+    }
+    if single {
+        return vec![VertexSet {
+            vertices: (0..mesh.num_vertices() as u32).collect(),
+            uv: Some(per_vertex.iter().map(|c| c.unwrap_or([0.0; 2])).collect()),
+            patches: by_patch
+                .iter()
+                .enumerate()
+                .filter(|(_, fs)| !fs.is_empty())
+                .map(|(p, fs)| (p, fs.iter().flat_map(|&f| mesh.triangles()[f]).collect()))
+                .collect(),
+        }];
+    }
     let mut sets = Vec::new();
     for (p, faces) in by_patch.iter().enumerate() {
         if faces.is_empty() {
@@ -1142,6 +1290,22 @@ fn vertex_sets(mesh: &Mesh) -> Vec<VertexSet> {
             }
         }
         sets.push(set);
+    }
+    // Vertices no triangle uses still go into the file (in the first set), so that joining
+    // the copies by `_VERTEX_ID` gives back the mesh's own numbering.
+    let mut used = vec![false; mesh.num_vertices()];
+    for t in mesh.triangles() {
+        for &v in t {
+            used[v as usize] = true;
+        }
+    }
+    if let Some(first) = sets.first_mut() {
+        for (v, _) in used.iter().enumerate().filter(|(_, u)| !**u) {
+            first.vertices.push(v as u32);
+            if let Some(c) = first.uv.as_mut() {
+                c.push([0.0, 0.0]);
+            }
+        }
     }
     sets
 }

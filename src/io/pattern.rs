@@ -221,10 +221,11 @@ pub fn layer_name(i: usize, patch: &str) -> String {
     format!("P{i}_{clean}")
 }
 
-/// `patterns.dxf`: ASCII DXF R12; each boundary loop of each piece is a closed POLYLINE on the
-/// piece's own layer, in drawing units, placed by [`layout`]. Coordinates are written with
-/// Rust's shortest round-trip formatting, so reading them back gives the same doubles.
-pub fn to_dxf(p: &Patterns) -> String {
+/// `patterns-plain.dxf` (`format=dxf-plain`): ASCII DXF R12; each boundary loop (sew line) of
+/// each piece is a closed POLYLINE on the piece's own layer, in drawing units, placed by
+/// [`layout`]. Coordinates are written with Rust's shortest round-trip formatting, so reading
+/// them back gives the same doubles.
+pub fn to_dxf_plain(p: &Patterns) -> String {
     let s = scale(p);
     let (off, w, h) = layout(p);
     let mut o = String::new();
@@ -282,6 +283,254 @@ pub fn to_dxf(p: &Patterns) -> String {
     }
     pair(0, "ENDSEC");
     pair(0, "EOF");
+    o
+}
+
+/// AAMA / ASTM D6673 layers used by [`to_dxf`].
+pub mod aama {
+    /// Piece boundary: the cut line, and the piece and style system text.
+    pub const BOUNDARY: &str = "1";
+    /// Notches (slit notches: a LINE from the boundary into the piece).
+    pub const NOTCHES: &str = "4";
+    /// Grain line.
+    pub const GRAIN: &str = "7";
+    /// Internal cut-outs: holes of the cut line.
+    pub const INTERNAL_CUTOUTS: &str = "11";
+    /// Sew lines.
+    pub const SEW: &str = "14";
+    /// Annotation text.
+    pub const ANNOTATION: &str = "15";
+}
+
+/// A DXF block name for a piece: [`layer_name`]'s form, unique per piece.
+pub fn block_name(i: usize, patch: &str) -> String {
+    layer_name(i, patch)
+}
+
+/// Depth of a notch's slit in millimetres (a quarter inch), at most the allowance.
+pub const NOTCH_DEPTH_MM: f64 = 6.35;
+
+/// `patterns.dxf`: the AAMA / ASTM D6673 layout in ASCII DXF R12. One BLOCK per piece (in
+/// drawing units, the piece's own coordinates) holding its cut line (layer 1; the sew line
+/// when there is no allowance), holes of the cut line (11), sew lines (14), slit notches from
+/// the cut line inwards (4), the grain line (7), and the piece system text `Piece Name:` and
+/// `Quantity:` (1) with its seams as annotation (15); ENTITIES holds the style system text and
+/// one INSERT per piece at its place in [`layout`].
+pub fn to_dxf(p: &Patterns) -> String {
+    let s = scale(p);
+    let (off, w, h) = layout(p);
+    let mm = mm_per(&p.unit).unwrap_or(1.0);
+    let text_h = 5.0 / mm;
+    let mut o = String::new();
+    let pair = |o: &mut String, code: i32, value: &str| {
+        let _ = write!(o, "{code}\n{value}\n");
+    };
+    let num = |x: f64| x.to_string();
+    let polyline = |o: &mut String, layer: &str, pts: &mut dyn Iterator<Item = [f64; 2]>| {
+        let mut w = |c: i32, v: &str| {
+            let _ = write!(o, "{c}\n{v}\n");
+        };
+        w(0, "POLYLINE");
+        w(8, layer);
+        w(66, "1");
+        w(10, "0");
+        w(20, "0");
+        w(30, "0");
+        w(70, "1");
+        for q in pts {
+            w(0, "VERTEX");
+            w(8, layer);
+            w(10, &q[0].to_string());
+            w(20, &q[1].to_string());
+            w(30, "0");
+        }
+        w(0, "SEQEND");
+        w(8, layer);
+    };
+    let line = |o: &mut String, layer: &str, a: [f64; 2], b: [f64; 2]| {
+        let _ = write!(
+            o,
+            "0\nLINE\n8\n{layer}\n10\n{}\n20\n{}\n30\n0\n11\n{}\n21\n{}\n31\n0\n",
+            a[0], a[1], b[0], b[1]
+        );
+    };
+    let text = |o: &mut String, layer: &str, at: [f64; 2], height: f64, t: &str| {
+        let clean: String = t.chars().filter(|c| !c.is_control()).take(250).collect();
+        let _ = write!(
+            o,
+            "0\nTEXT\n8\n{layer}\n10\n{}\n20\n{}\n30\n0\n40\n{height}\n1\n{clean}\n",
+            at[0], at[1]
+        );
+    };
+    pair(&mut o, 0, "SECTION");
+    pair(&mut o, 2, "HEADER");
+    pair(&mut o, 9, "$ACADVER");
+    pair(&mut o, 1, "AC1009");
+    pair(&mut o, 9, "$EXTMIN");
+    pair(&mut o, 10, "0");
+    pair(&mut o, 20, "0");
+    pair(&mut o, 9, "$EXTMAX");
+    pair(&mut o, 10, &num(w));
+    pair(&mut o, 20, &num(h));
+    pair(&mut o, 0, "ENDSEC");
+    pair(&mut o, 0, "SECTION");
+    pair(&mut o, 2, "TABLES");
+    pair(&mut o, 0, "TABLE");
+    pair(&mut o, 2, "LAYER");
+    let layers = [
+        ("0", 7),
+        (aama::BOUNDARY, 7),
+        (aama::NOTCHES, 1),
+        (aama::GRAIN, 5),
+        (aama::INTERNAL_CUTOUTS, 7),
+        (aama::SEW, 8),
+        (aama::ANNOTATION, 3),
+    ];
+    pair(&mut o, 70, &layers.len().to_string());
+    for (name, color) in layers {
+        pair(&mut o, 0, "LAYER");
+        pair(&mut o, 2, name);
+        pair(&mut o, 70, "0");
+        pair(&mut o, 62, &color.to_string());
+        pair(&mut o, 6, "CONTINUOUS");
+    }
+    pair(&mut o, 0, "ENDTAB");
+    pair(&mut o, 0, "ENDSEC");
+    pair(&mut o, 0, "SECTION");
+    pair(&mut o, 2, "BLOCKS");
+    for (i, pc) in p.pieces.iter().enumerate() {
+        let at = |q: [f64; 2]| [q[0] * s, q[1] * s];
+        pair(&mut o, 0, "BLOCK");
+        pair(&mut o, 8, "0");
+        pair(&mut o, 2, &block_name(i, &pc.patch));
+        pair(&mut o, 70, "0");
+        pair(&mut o, 10, "0");
+        pair(&mut o, 20, "0");
+        pair(&mut o, 30, "0");
+        if pc.cut_lines.is_empty() {
+            for (k, lp) in pc.boundary_loops.iter().enumerate() {
+                let layer = if k == 0 {
+                    aama::BOUNDARY
+                } else {
+                    aama::INTERNAL_CUTOUTS
+                };
+                polyline(
+                    &mut o,
+                    layer,
+                    &mut lp.iter().map(|&v| at(pc.uv[v as usize])),
+                );
+            }
+        } else {
+            for (k, lp) in pc.cut_lines.iter().enumerate() {
+                let layer = if k == 0 {
+                    aama::BOUNDARY
+                } else {
+                    aama::INTERNAL_CUTOUTS
+                };
+                polyline(&mut o, layer, &mut lp.iter().map(|&q| at(q)));
+            }
+            for lp in &pc.boundary_loops {
+                polyline(
+                    &mut o,
+                    aama::SEW,
+                    &mut lp.iter().map(|&v| at(pc.uv[v as usize])),
+                );
+            }
+        }
+        for n in &pc.notches {
+            let reach =
+                ((n.at[0] - n.cut_at[0]).powi(2) + (n.at[1] - n.cut_at[1]).powi(2)).sqrt() * s;
+            let depth = if reach > 0.0 {
+                reach.min(NOTCH_DEPTH_MM / mm)
+            } else {
+                NOTCH_DEPTH_MM / mm
+            };
+            let a = at(n.cut_at);
+            line(
+                &mut o,
+                aama::NOTCHES,
+                a,
+                [a[0] + n.inward[0] * depth, a[1] + n.inward[1] * depth],
+            );
+        }
+        if let Some([a, b]) = pc.grain {
+            line(&mut o, aama::GRAIN, at(a), at(b));
+        }
+        let c = pc
+            .grain
+            .map(|[a, b]| [(a[0] + b[0]) / 2.0, (a[1] + b[1]) / 2.0])
+            .or_else(|| centroid(&pc.uv))
+            .map(at)
+            .unwrap_or([0.0, 0.0]);
+        let x = c[0] + text_h;
+        text(
+            &mut o,
+            aama::BOUNDARY,
+            [x, c[1]],
+            text_h,
+            &format!("Piece Name: {}", pc.patch),
+        );
+        text(
+            &mut o,
+            aama::BOUNDARY,
+            [x, c[1] - 1.5 * text_h],
+            text_h,
+            "Quantity: 1",
+        );
+        let seams: Vec<String> = p
+            .seams
+            .iter()
+            .enumerate()
+            .filter(|(_, sm)| sm.pieces.contains(&i))
+            .map(|(k, sm)| {
+                let other = if sm.pieces[0] == i {
+                    &sm.patches[1]
+                } else {
+                    &sm.patches[0]
+                };
+                format!("S{k} to {other}")
+            })
+            .collect();
+        if !seams.is_empty() {
+            text(
+                &mut o,
+                aama::ANNOTATION,
+                [x, c[1] - 3.0 * text_h],
+                text_h * 0.7,
+                &format!("Seams: {}", seams.join(", ")),
+            );
+        }
+        pair(&mut o, 0, "ENDBLK");
+        pair(&mut o, 8, "0");
+    }
+    pair(&mut o, 0, "ENDSEC");
+    pair(&mut o, 0, "SECTION");
+    pair(&mut o, 2, "ENTITIES");
+    let units = if p.unit == "in" { "ENGLISH" } else { "METRIC" };
+    text(
+        &mut o,
+        aama::BOUNDARY,
+        [0.0, -2.0 * text_h],
+        text_h,
+        "Style Name: flatmesh",
+    );
+    text(
+        &mut o,
+        aama::BOUNDARY,
+        [0.0, -3.5 * text_h],
+        text_h,
+        &format!("Units: {units} ({})", p.unit),
+    );
+    for (i, pc) in p.pieces.iter().enumerate() {
+        pair(&mut o, 0, "INSERT");
+        pair(&mut o, 8, "0");
+        pair(&mut o, 2, &block_name(i, &pc.patch));
+        pair(&mut o, 10, &num(off[i][0]));
+        pair(&mut o, 20, &num(off[i][1]));
+        pair(&mut o, 30, "0");
+    }
+    pair(&mut o, 0, "ENDSEC");
+    pair(&mut o, 0, "EOF");
     o
 }
 

@@ -1,5 +1,5 @@
 //! Turn a finished job into the files a user downloads: `report.json`, `mesh.glb`, `mesh.gltf`,
-//! `mesh.obj`; patterns (`patterns.json`, `.svg`, `.dxf`) for a job that flattens or changes
+//! `mesh.obj`; patterns (`patterns.json`, `.svg`, `.dxf` in the AAMA layout, `patterns-plain.dxf`) for a job that flattens or changes
 //! the mesh; and for `subdivide` every level's `level_<k>.glb`, `.gltf` and `.obj`. The CLI
 //! writes them into a directory and the service stores them; both call [`render`], so the two
 //! give the same files.
@@ -140,6 +140,11 @@ pub fn render(
             name: "patterns.dxf".into(),
             media_type: "image/vnd.dxf",
             bytes: io::pattern::to_dxf(p).into_bytes(),
+        });
+        out.push(Artifact {
+            name: "patterns-plain.dxf".into(),
+            media_type: "image/vnd.dxf",
+            bytes: io::pattern::to_dxf_plain(p).into_bytes(),
         });
     }
     // `subdivide`: every level's mesh as `level_<k>.*` (k from 1).

@@ -470,7 +470,11 @@ fn check_uv(uv: &UvLayer, faces: usize) -> Result<(), MeshError> {
             what: format!("face {f} refers to a texture coordinate that does not exist"),
         });
     }
-    if let Some(k) = uv.coords.iter().position(|c| !(c[0].is_finite() && c[1].is_finite())) {
+    if let Some(k) = uv
+        .coords
+        .iter()
+        .position(|c| !(c[0].is_finite() && c[1].is_finite()))
+    {
         return Err(MeshError::Inconsistent {
             what: format!("texture coordinate {k} is not finite"),
         });

@@ -132,12 +132,16 @@ pub fn apply(p: &mut Patterns, positions: &[[f64; 3]], f: &Finish) -> Vec<String
     let allowances = edge_allowances(p, f);
     for (i, pc) in p.pieces.iter_mut().enumerate() {
         let limit = f.mitre_limit.max(1.0);
-        pc.cut_lines = cut_lines(pc, &|a, b| {
-            allowances
-                .get(&(i, a.min(b), a.max(b)))
-                .copied()
-                .unwrap_or(f.hem_allowance)
-        }, limit);
+        pc.cut_lines = cut_lines(
+            pc,
+            &|a, b| {
+                allowances
+                    .get(&(i, a.min(b), a.max(b)))
+                    .copied()
+                    .unwrap_or(f.hem_allowance)
+            },
+            limit,
+        );
         let cut = &pc.cut_lines;
         for n in &mut pc.notches {
             n.cut_at = out_to(cut, n.at, [-n.inward[0], -n.inward[1]]).unwrap_or(n.at);
@@ -203,17 +207,20 @@ fn centroid(pc: &Piece) -> ([f64; 2], f64) {
     }
 }
 
-/// The piece's principal axis (of its area), pointing into y ≥ 0.
+/// The piece's principal axis (the major axis of its area's second moment, exact for the
+/// triangles whatever the triangulation), pointing into y ≥ 0.
 fn principal_axis(pc: &Piece) -> [f64; 2] {
     let (m, _) = centroid(pc);
     let (mut xx, mut xy, mut yy) = (0.0, 0.0, 0.0);
     for t in &pc.triangles {
-        let [a, b, d] = t.map(|i| pc.uv[i as usize]);
+        let [a, b, d] = t.map(|i| sub2(pc.uv[i as usize], m));
         let area = 0.5 * cross2(sub2(b, a), sub2(d, a)).abs();
-        let c = sub2([(a[0] + b[0] + d[0]) / 3.0, (a[1] + b[1] + d[1]) / 3.0], m);
-        xx += area * c[0] * c[0];
-        xy += area * c[0] * c[1];
-        yy += area * c[1] * c[1];
+        // ∫_T x xᵀ dA = A/12 (Σ vᵢvᵢᵀ + (Σ vᵢ)(Σ vᵢ)ᵀ)
+        let s = [a[0] + b[0] + d[0], a[1] + b[1] + d[1]];
+        let k = area / 12.0;
+        xx += k * (a[0] * a[0] + b[0] * b[0] + d[0] * d[0] + s[0] * s[0]);
+        xy += k * (a[0] * a[1] + b[0] * b[1] + d[0] * d[1] + s[0] * s[1]);
+        yy += k * (a[1] * a[1] + b[1] * b[1] + d[1] * d[1] + s[1] * s[1]);
     }
     let phi = 0.5 * (2.0 * xy).atan2(xx - yy);
     let d = [phi.cos(), phi.sin()];
@@ -297,64 +304,57 @@ fn orient(pc: &mut Piece, positions: &[[f64; 3]], grain: Grain) -> Option<String
         *q = [m[0] + c * r[0] - s * r[1], m[1] + s * r[0] + c * r[1]];
     }
     let (m, _) = centroid(pc);
-    let (lo, hi) = pc
-        .uv
-        .iter()
-        .fold((f64::MAX, f64::MIN), |(lo, hi), q| (lo.min(q[1]), hi.max(q[1])));
+    let (lo, hi) = pc.uv.iter().fold((f64::MAX, f64::MIN), |(lo, hi), q| {
+        (lo.min(q[1]), hi.max(q[1]))
+    });
     let half = if hi > lo { (hi - lo) / 4.0 } else { 0.0 };
     pc.grain = Some([[m[0], m[1] - half], [m[0], m[1] + half]]);
     warning
 }
 
-/// A seam side's edges in walking order: the uv vertices and whether they close a loop. None
-/// when the edges do not form one simple path or loop.
-fn walk(edges: &[[u32; 2]]) -> Option<(Vec<u32>, bool)> {
+/// A seam side's edges in walking order, each directed along the walk, and whether they close
+/// a loop. The walk follows the mesh vertices (`vid`), not the piece's: where another cut
+/// ends on the seam, one side has two copies of a vertex, and its edges are still one path
+/// on the surface. None when they do not form one simple path or loop.
+fn walk(edges: &[[u32; 2]], vid: &dyn Fn(u32) -> u32) -> Option<(Vec<[u32; 2]>, bool)> {
     if edges.is_empty() {
         return None;
     }
     let mut at: HashMap<u32, Vec<usize>> = HashMap::new();
     for (k, e) in edges.iter().enumerate() {
-        if e[0] == e[1] {
+        let (a, b) = (vid(e[0]), vid(e[1]));
+        if a == b {
             return None;
         }
-        at.entry(e[0]).or_default().push(k);
-        at.entry(e[1]).or_default().push(k);
+        at.entry(a).or_default().push(k);
+        at.entry(b).or_default().push(k);
     }
     if at.values().any(|v| v.len() > 2) {
         return None;
     }
-    let ends: Vec<u32> = {
-        let mut v: Vec<u32> = at
-            .iter()
-            .filter(|(_, e)| e.len() == 1)
-            .map(|(&v, _)| v)
-            .collect();
-        v.sort_unstable();
-        v
-    };
+    let mut ends: Vec<u32> = at
+        .iter()
+        .filter(|(_, e)| e.len() == 1)
+        .map(|(&v, _)| v)
+        .collect();
+    ends.sort_unstable();
     let closed = ends.is_empty();
     if !closed && ends.len() != 2 {
         return None;
     }
-    let start = if closed {
-        edges.iter().map(|e| e[0].min(e[1])).min()?
-    } else {
-        ends[0]
-    };
+    let start = if closed { *at.keys().min()? } else { ends[0] };
     let mut used = vec![false; edges.len()];
-    let mut order = vec![start];
+    let mut order = Vec::with_capacity(edges.len());
     let mut v = start;
     while let Some(&k) = at[&v].iter().find(|&&k| !used[k]) {
         used[k] = true;
         let e = edges[k];
-        v = if e[0] == v { e[1] } else { e[0] };
-        order.push(v);
+        let forward = vid(e[0]) == v;
+        order.push(if forward { e } else { [e[1], e[0]] });
+        v = if forward { vid(e[1]) } else { vid(e[0]) };
     }
     if used.iter().any(|u| !u) {
         return None;
-    }
-    if closed {
-        order.pop();
     }
     Some((order, closed))
 }
@@ -363,16 +363,18 @@ fn walk(edges: &[[u32; 2]]) -> Option<(Vec<u32>, bool)> {
 fn notches(p: &mut Patterns, positions: &[[f64; 3]], spacing: f64) -> Vec<String> {
     let mut warnings = Vec::new();
     let mut out: Vec<Vec<Notch>> = vec![Vec::new(); p.pieces.len()];
+    let thirds: Vec<HashMap<(u32, u32), u32>> = p.pieces.iter().map(opposite).collect();
     for (s, seam) in p.seams.iter().enumerate() {
         let pieces = seam.pieces;
         if pieces.iter().any(|&i| i >= p.pieces.len()) {
             continue;
         }
-        let pos = |side: usize, v: u32| {
-            positions[p.pieces[pieces[side]].vertex_ids[v as usize] as usize]
-        };
+        let vid0 = |v: u32| p.pieces[pieces[0]].vertex_ids[v as usize];
+        let vid1 = |v: u32| p.pieces[pieces[1]].vertex_ids[v as usize];
+        let pos =
+            |side: usize, v: u32| positions[p.pieces[pieces[side]].vertex_ids[v as usize] as usize];
         let (Some((w0, closed0)), Some((mut w1, closed1))) =
-            (walk(&seam.edges[0]), walk(&seam.edges[1]))
+            (walk(&seam.edges[0], &vid0), walk(&seam.edges[1], &vid1))
         else {
             warnings.push(format!(
                 "seam S{s} ({} – {}): not one simple path on both pieces; no notches",
@@ -389,28 +391,37 @@ fn notches(p: &mut Patterns, positions: &[[f64; 3]], spacing: f64) -> Vec<String
         }
         // Side 1 walked from side 0's start, in side 0's direction (matched in 3D).
         let n = w0.len();
-        let p0 = pos(0, w0[0]);
+        let p0 = pos(0, w0[0][0]);
+        let reverse = |w: &mut Vec<[u32; 2]>| {
+            w.reverse();
+            for e in w.iter_mut() {
+                e.swap(0, 1);
+            }
+        };
         if closed0 {
             let k = (0..n)
                 .min_by(|&a, &b| {
-                    dist3(pos(1, w1[a]), p0).total_cmp(&dist3(pos(1, w1[b]), p0))
+                    dist3(pos(1, w1[a][0]), p0).total_cmp(&dist3(pos(1, w1[b][0]), p0))
                 })
                 .unwrap_or(0);
             w1.rotate_left(k);
-            if n > 2 && dist3(pos(1, w1[n - 1]), pos(0, w0[1])) < dist3(pos(1, w1[1]), pos(0, w0[1])) {
-                w1[1..].reverse();
+            if dist3(pos(1, w1[0][1]), pos(0, w0[0][1]))
+                > dist3(pos(1, w1[n - 1][0]), pos(0, w0[0][1]))
+            {
+                // Walk the loop the other way (reversed, it still starts at w1[0][0]).
+                reverse(&mut w1);
             }
-        } else if dist3(pos(1, w1[n - 1]), p0) < dist3(pos(1, w1[0]), p0) {
-            w1.reverse();
+        } else if dist3(pos(1, w1[n - 1][1]), p0) < dist3(pos(1, w1[0][0]), p0) {
+            reverse(&mut w1);
         }
         let mut cum = vec![0.0];
-        for i in 0..(if closed0 { n } else { n - 1 }) {
-            let l = dist3(pos(0, w0[i]), pos(0, w0[(i + 1) % n]));
-            cum.push(cum[i] + l);
+        for (i, e) in w0.iter().enumerate() {
+            cum.push(cum[i] + dist3(pos(0, e[0]), pos(0, e[1])));
         }
         let total = *cum.last().unwrap_or(&0.0);
         let tol = 1e-6 * total.max(f64::MIN_POSITIVE);
-        if (0..n).any(|i| dist3(pos(0, w0[i]), pos(1, w1[i])) > tol) {
+        let apart = |i: usize, k: usize| dist3(pos(0, w0[i][k]), pos(1, w1[i][k])) > tol;
+        if (0..n).any(|i| apart(i, 0) || apart(i, 1)) {
             warnings.push(format!(
                 "seam S{s} ({} – {}): its two sides do not meet in 3D; no notches",
                 seam.patches[0], seam.patches[1]
@@ -430,9 +441,8 @@ fn notches(p: &mut Patterns, positions: &[[f64; 3]], spacing: f64) -> Vec<String
         if !closed0 {
             at.push(total);
         }
-        let edges = cum.len() - 1;
         for (number, &s_at) in at.iter().enumerate() {
-            let i = cum[1..].partition_point(|&c| c < s_at).min(edges - 1);
+            let i = cum[1..].partition_point(|&c| c < s_at).min(n - 1);
             let l = cum[i + 1] - cum[i];
             let t = if l > 0.0 {
                 ((s_at - cum[i]) / l).clamp(0.0, 1.0)
@@ -441,7 +451,7 @@ fn notches(p: &mut Patterns, positions: &[[f64; 3]], spacing: f64) -> Vec<String
             };
             for (side, w) in [&w0, &w1].into_iter().enumerate() {
                 let pc = &p.pieces[pieces[side]];
-                let edge = [w[i], w[(i + 1) % n]];
+                let edge = w[i];
                 let (a, b) = (pc.uv[edge[0] as usize], pc.uv[edge[1] as usize]);
                 let at = [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])];
                 out[pieces[side]].push(Notch {
@@ -451,7 +461,7 @@ fn notches(p: &mut Patterns, positions: &[[f64; 3]], spacing: f64) -> Vec<String
                     edge,
                     t,
                     at,
-                    inward: inward(pc, edge),
+                    inward: inward(pc, &thirds[pieces[side]], edge),
                     cut_at: at,
                 });
             }
@@ -463,8 +473,26 @@ fn notches(p: &mut Patterns, positions: &[[f64; 3]], spacing: f64) -> Vec<String
     warnings
 }
 
-/// Unit normal of a boundary edge pointing into its triangle.
-fn inward(pc: &Piece, e: [u32; 2]) -> [f64; 2] {
+/// The third vertex of the triangle on each boundary edge of a piece, by (lower, higher)
+/// uv vertex.
+fn opposite(pc: &Piece) -> HashMap<(u32, u32), u32> {
+    let mut count: HashMap<(u32, u32), (u32, u32)> = HashMap::new();
+    for t in &pc.triangles {
+        for k in 0..3 {
+            let (a, b, c) = (t[k], t[(k + 1) % 3], t[(k + 2) % 3]);
+            let e = count.entry((a.min(b), a.max(b))).or_insert((0, c));
+            e.0 += 1;
+        }
+    }
+    count
+        .into_iter()
+        .filter(|(_, (n, _))| *n == 1)
+        .map(|(e, (_, c))| (e, c))
+        .collect()
+}
+
+/// Unit normal of a boundary edge pointing into its triangle (`third`: [`opposite`]).
+fn inward(pc: &Piece, third: &HashMap<(u32, u32), u32>, e: [u32; 2]) -> [f64; 2] {
     let (a, b) = (pc.uv[e[0] as usize], pc.uv[e[1] as usize]);
     let d = sub2(b, a);
     let l = len2(d);
@@ -472,12 +500,7 @@ fn inward(pc: &Piece, e: [u32; 2]) -> [f64; 2] {
         return [0.0, 0.0];
     }
     let left = [-d[1] / l, d[0] / l];
-    let third = pc
-        .triangles
-        .iter()
-        .find(|t| t.contains(&e[0]) && t.contains(&e[1]))
-        .and_then(|t| t.iter().find(|&&v| v != e[0] && v != e[1]));
-    match third {
+    match third.get(&(e[0].min(e[1]), e[0].max(e[1]))) {
         Some(&c) if dot2(sub2(pc.uv[c as usize], a), left) < 0.0 => [-left[0], -left[1]],
         _ => left,
     }
@@ -510,6 +533,7 @@ fn cut_lines(pc: &Piece, allowance: &dyn Fn(u32, u32) -> f64, limit: f64) -> Vec
     // holes clockwise), rectangles and joins are made to count positively.
     let mut shapes: Vec<(Vec<[f64; 2]>, bool)> = Vec::new();
     let mut reach: f64 = 0.0;
+    let third = opposite(pc);
     for lp in &pc.boundary_loops {
         let n = lp.len();
         if n < 3 {
@@ -520,7 +544,7 @@ fn cut_lines(pc: &Piece, allowance: &dyn Fn(u32, u32) -> f64, limit: f64) -> Vec
             .filter(|&k| {
                 let e = [lp[k], lp[(k + 1) % n]];
                 let d = sub2(pc.uv[e[1] as usize], pc.uv[e[0] as usize]);
-                dot2(inward(pc, e), [-d[1], d[0]]) > 0.0
+                dot2(inward(pc, &third, e), [-d[1], d[0]]) > 0.0
             })
             .count();
         let mut lp: Vec<u32> = lp.clone();
@@ -535,7 +559,11 @@ fn cut_lines(pc: &Piece, allowance: &dyn Fn(u32, u32) -> f64, limit: f64) -> Vec
             let (a, b) = (q(k), q(k + 1));
             let d = sub2(b, a);
             let l = len2(d);
-            let nr = if l > 0.0 { [d[1] / l, -d[0] / l] } else { [0.0, 0.0] };
+            let nr = if l > 0.0 {
+                [d[1] / l, -d[0] / l]
+            } else {
+                [0.0, 0.0]
+            };
             let w = allowance(lp[k], lp[(k + 1) % n]).max(0.0);
             reach = reach.max(w);
             normal.push(nr);
@@ -564,16 +592,24 @@ fn cut_lines(pc: &Piece, allowance: &dyn Fn(u32, u32) -> f64, limit: f64) -> Vec
 }
 
 /// The join at a convex corner v between an edge arriving with outward normal n1 at allowance
-/// d1 and one leaving with n2, d2: the mitre where the offset lines meet, cut off at
-/// `limit` × max(d1, d2) from v along the bisector. None at a reflex or straight corner.
-fn corner(v: [f64; 2], n1: [f64; 2], d1: f64, n2: [f64; 2], d2: f64, limit: f64) -> Option<Vec<[f64; 2]>> {
+/// d1 and one leaving with n2, d2: the mitre [v, p1, M, p2] where the offset lines meet at M,
+/// cut off at `limit` × max(d1, d2) from v along the bisector. None at a straight or reflex
+/// corner (the edges' rectangles already cover it).
+fn corner(
+    v: [f64; 2],
+    n1: [f64; 2],
+    d1: f64,
+    n2: [f64; 2],
+    d2: f64,
+    limit: f64,
+) -> Option<Vec<[f64; 2]>> {
     // Directions of the two edges (outward normal is the right-hand one).
     let t1 = [-n1[1], n1[0]];
     let t2 = [-n2[1], n2[0]];
-    let turn = cross2(t1, t2);
+    let (turn, along) = (cross2(t1, t2), dot2(t1, t2));
     let dmax = d1.max(d2);
-    if dmax <= 0.0 || (turn <= 1e-12 && dot2(t1, t2) > 0.0) || len2(t1) == 0.0 || len2(t2) == 0.0
-    {
+    let hairpin = turn.abs() <= 1e-12 && along < 0.0;
+    if dmax <= 0.0 || len2(t1) == 0.0 || len2(t2) == 0.0 || (turn <= 1e-12 && !hairpin) {
         return None;
     }
     let p1 = [v[0] + d1 * n1[0], v[1] + d1 * n1[1]];
@@ -585,34 +621,40 @@ fn corner(v: [f64; 2], n1: [f64; 2], d1: f64, n2: [f64; 2], d2: f64, limit: f64)
         t1
     };
     let cap = limit * dmax;
-    // Mitre point: p1 + α t1 = p2 − β t2.
-    if turn > 1e-12 {
-        let r = sub2(p2, p1);
-        let alpha = cross2(r, t2) / turn;
-        let beta = -cross2(r, t1) / turn;
-        let m = [p1[0] + alpha * t1[0], p1[1] + alpha * t1[1]];
-        if alpha >= 0.0 && beta >= 0.0 && dot2(sub2(m, v), bisector) <= cap {
-            return Some(vec![v, p1, m, p2]);
+    let wedge = if hairpin {
+        // The offset lines never meet: a square end at the cap.
+        vec![
+            v,
+            p1,
+            [p1[0] + cap * t1[0], p1[1] + cap * t1[1]],
+            [p2[0] - cap * t2[0], p2[1] - cap * t2[1]],
+            p2,
+        ]
+    } else {
+        // Mitre point: p1 + α t1 = p2 − β t2.
+        let alpha = cross2(sub2(p2, p1), t2) / turn;
+        vec![v, p1, [p1[0] + alpha * t1[0], p1[1] + alpha * t1[1]], p2]
+    };
+    let clipped = clip_half_plane(&wedge, v, bisector, cap);
+    (clipped.len() >= 3).then_some(clipped)
+}
+
+/// The part of a polygon where (x − v)·b ≤ c (Sutherland–Hodgman against one line).
+fn clip_half_plane(poly: &[[f64; 2]], v: [f64; 2], b: [f64; 2], c: f64) -> Vec<[f64; 2]> {
+    let f = |p: [f64; 2]| dot2(sub2(p, v), b) - c;
+    let mut out = Vec::with_capacity(poly.len() + 1);
+    for k in 0..poly.len() {
+        let (p, q) = (poly[k], poly[(k + 1) % poly.len()]);
+        let (fp, fq) = (f(p), f(q));
+        if fp <= 0.0 {
+            out.push(p);
+        }
+        if (fp < 0.0 && fq > 0.0) || (fp > 0.0 && fq < 0.0) {
+            let t = fp / (fp - fq);
+            out.push([p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1])]);
         }
     }
-    // Squared off where the offset lines cross the line at `cap` across the bisector.
-    let along = |p: [f64; 2], t: [f64; 2]| {
-        let tb = dot2(t, bisector);
-        if tb.abs() < 1e-12 {
-            0.0
-        } else {
-            ((cap - dot2(sub2(p, v), bisector)) / tb).max(0.0)
-        }
-    };
-    let s1 = along(p1, t1);
-    let s2 = along(p2, [-t2[0], -t2[1]]);
-    Some(vec![
-        v,
-        p1,
-        [p1[0] + s1 * t1[0], p1[1] + s1 * t1[1]],
-        [p2[0] - s2 * t2[0], p2[1] - s2 * t2[1]],
-        p2,
-    ])
+    out
 }
 
 fn signed_area(poly: &[[f64; 2]]) -> f64 {
@@ -657,6 +699,7 @@ fn union(shapes: Vec<(Vec<[f64; 2]>, bool)>) -> Vec<Vec<[f64; 2]>> {
         })
         .collect();
     let result = clipper2_rust::union_subjects_64(&paths, FillRule::Positive);
+
     let mut out: Vec<(f64, Vec<[f64; 2]>)> = result
         .iter()
         .map(|p| {
@@ -665,6 +708,10 @@ fn union(shapes: Vec<(Vec<[f64; 2]>, bool)>) -> Vec<Vec<[f64; 2]>> {
         })
         .filter(|(a, _)| *a != 0.0)
         .collect();
-    out.sort_by(|a, b| (b.0 > 0.0).cmp(&(a.0 > 0.0)).then(b.0.abs().total_cmp(&a.0.abs())));
+    out.sort_by(|a, b| {
+        (b.0 > 0.0)
+            .cmp(&(a.0 > 0.0))
+            .then(b.0.abs().total_cmp(&a.0.abs()))
+    });
     out.into_iter().map(|(_, p)| p).collect()
 }

@@ -300,7 +300,11 @@ impl Params {
         length("hem_allowance", self.hem_allowance, 0.0)?;
         length("notch_spacing", self.notch_spacing, 1.0)?;
         for (k, o) in self.seam_allowances.iter().enumerate() {
-            length(&format!("seam_allowances[{k}].allowance"), Some(o.allowance), 0.0)?;
+            length(
+                &format!("seam_allowances[{k}].allowance"),
+                Some(o.allowance),
+                0.0,
+            )?;
         }
         if !(self.mitre_limit >= 1.0 && self.mitre_limit <= 100.0) {
             return Err(AlgoError::InvalidParam {
@@ -340,10 +344,7 @@ impl Params {
                 finish::Corners::Mitre => self.mitre_limit,
                 finish::Corners::Square => 1.0,
             },
-            notch_spacing: self
-                .notch_spacing
-                .unwrap_or(DEFAULT_NOTCH_SPACING_MM / mm)
-                * k,
+            notch_spacing: self.notch_spacing.unwrap_or(DEFAULT_NOTCH_SPACING_MM / mm) * k,
             grain: self.grain,
         }
     }
@@ -1131,11 +1132,8 @@ pub fn run(
         unit: params.unit.name().to_string(),
         svg_triangles: params.svg_triangles,
     };
-    let finish_warnings = finish::apply(
-        &mut patterns,
-        mesh.positions(),
-        &params.finish(input_unit),
-    );
+    let finish_warnings =
+        finish::apply(&mut patterns, mesh.positions(), &params.finish(input_unit));
     let mut summary = summary;
     summary.job_warnings.extend(finish_warnings);
     let mesh = patterns

@@ -744,7 +744,7 @@ pub async fn job_mesh(
     artifact(&st, &tenant, &headers, &id, &name, media).await
 }
 
-/// `GET /v1/jobs/{id}/patterns?format=json|svg|dxf` (jobs that flatten).
+/// `GET /v1/jobs/{id}/patterns?format=json|svg|dxf|dxf-plain` (jobs that flatten).
 pub async fn job_patterns(
     State(st): State<AppState>,
     Extension(tenant): Extension<Tenant>,
@@ -752,12 +752,15 @@ pub async fn job_patterns(
     Query(q): Query<HashMap<String, String>>,
     headers: HeaderMap,
 ) -> ApiResult {
-    let f = format_param(&q, "json", &["json", "svg", "dxf"])?;
+    let f = format_param(&q, "json", &["json", "svg", "dxf", "dxf-plain"])?;
     let media = match f.as_str() {
         "json" => "application/json",
         "svg" => "image/svg+xml",
         _ => "image/vnd.dxf",
     };
-    let name = format!("patterns.{f}");
+    let name = match f.as_str() {
+        "dxf-plain" => "patterns-plain.dxf".to_string(),
+        _ => format!("patterns.{f}"),
+    };
     artifact(&st, &tenant, &headers, &id, &name, media).await
 }
