@@ -325,8 +325,8 @@ fn notch_points(pat: &Patterns, pos: &[[f64; 3]]) -> Vec<((usize, usize), usize,
 
 fn check_notches_match(pat: &Patterns, pos: &[[f64; 3]], what: &str) -> usize {
     let points = notch_points(pat, pos);
-    let mut by: std::collections::HashMap<(usize, usize), Vec<(usize, [f64; 3])>> =
-        Default::default();
+    type Sides = Vec<(usize, [f64; 3])>;
+    let mut by: std::collections::HashMap<(usize, usize), Sides> = Default::default();
     for (key, side, p) in points {
         by.entry(key).or_default().push((side, p));
     }
@@ -434,8 +434,8 @@ fn the_flattened_mesh_carries_its_pattern_as_uvs_through_obj_and_gltf() {
     let s = pat.scale();
     for (i, pc) in pat.pieces.iter().enumerate() {
         for (t, &f) in pc.triangles.iter().zip(&pc.faces) {
-            for k in 0..3 {
-                let q = pc.uv[t[k] as usize];
+            for (k, &corner) in t.iter().enumerate() {
+                let q = pc.uv[corner as usize];
                 let c = uv.coords[uv.triangles[f as usize][k] as usize];
                 assert!((c[0] - (q[0] * s + off[i][0])).abs() < 1e-9);
                 assert!((c[1] - (q[1] * s + off[i][1])).abs() < 1e-9);

@@ -283,7 +283,7 @@ fn orient(pc: &mut Piece, positions: &[[f64; 3]], grain: Grain) -> Option<String
             let (d, share) = image_of(pc, positions, g);
             let l = len2(d);
             // Below a fifth of the piece's area seeing g along it, the direction is noise.
-            if share < 0.2 || !(l > 0.0) {
+            if share < 0.2 || l.is_nan() || l <= 0.0 {
                 warning = Some(format!(
                     "piece `{}`: the grain direction lies across the piece (only {:.0} % of it \
                      along the surface); its principal axis is used instead",
