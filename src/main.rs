@@ -42,8 +42,9 @@ enum Command {
     /// DIR receives the files a service job stores: report.json (the flattenability report of
     /// the output mesh, the job's own figures under "job"), mesh.glb, mesh.gltf and mesh.obj;
     /// `flatten`, and the kinds that change the mesh (their output flattened with flatten's
-    /// defaults), also write patterns.json, patterns.svg and patterns.dxf. Progress goes to
-    /// stderr. Exit status: 0 on success, 2 for invalid input or parameters, 3 when an
+    /// defaults), also write patterns.json, patterns.svg, patterns.dxf (AAMA) and
+    /// patterns-plain.dxf, and their mesh carries the pattern as texture coordinates. Progress
+    /// goes to stderr. Exit status: 0 on success, 2 for invalid input or parameters, 3 when an
     /// optimiser ran and wrote its best result but did not converge (one line on stderr gives
     /// the ϖ_max reached, why it stopped and the stuck vertices), 1 on other failures.
     ///

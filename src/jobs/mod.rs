@@ -85,8 +85,10 @@ impl Kind {
         match self {
             Kind::Report => "the flattenability report of the input; the mesh is unchanged",
             Kind::Flatten => {
-                "sewing-pattern pieces (LPFB), one per connected part of each patch; also \
-                 writes patterns.json, .svg and .dxf"
+                "cut-ready sewing-pattern pieces (LPFB), one per connected part of each \
+                 patch, with seam allowance, notches and grain; also writes patterns.json, \
+                 .svg, .dxf (AAMA) and patterns-plain.dxf, and the mesh carries the pattern as \
+                 texture coordinates"
             }
             Kind::FlMesh => {
                 "make the mesh flattenable (FL-mesh optimisation); the best iterate is written, \
@@ -125,7 +127,13 @@ impl Kind {
                  cuts=auto|virtual|real (auto: loops that enclose curvature are cut open, the \
                  others stay holes), curvature_tolerance (1e-3 rad), interior=arap|harmonic \
                  (arap), boundary_angles=conformal|surface (conformal), max_iterations (200), \
-                 tolerance (1e-5), svg_triangles=true|false (false)"
+                 tolerance (1e-5), svg_triangles=true|false (false), seam_allowance (10 mm, \
+                 in the drawing unit; 0: no cut line), hem_allowance (the seam allowance), \
+                 seam_allowances ([{\"patches\": [A, B], \"allowance\": X}]), \
+                 corners=mitre|square (mitre), mitre_limit (3), notch_spacing (50 mm; 0: seam \
+                 ends only), grain=up|principal|none (up: the mesh's +Y; or a 3D \
+                 direction [x, y, z]), \
+                 fabric_width (1500 mm, for the cost estimate)"
             }
             Kind::FlMesh => {
                 "w1 (1), w2 (0.1), tau (0.25), step_rule=merit|fixed|lm (merit), \

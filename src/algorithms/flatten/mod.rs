@@ -40,6 +40,7 @@
 pub mod cut;
 pub mod finish;
 pub mod lpfb;
+pub mod marker;
 pub mod measures;
 pub mod param;
 
@@ -169,6 +170,8 @@ fn default_mitre_limit() -> f64 {
 pub const DEFAULT_SEAM_ALLOWANCE_MM: f64 = 10.0;
 /// Arc length between notches when none is given, in millimetres.
 pub const DEFAULT_NOTCH_SPACING_MM: f64 = 50.0;
+/// Width of the roll for the cost estimate when none is given, in millimetres.
+pub const DEFAULT_FABRIC_WIDTH_MM: f64 = 1500.0;
 
 /// Parameters of `flatten`; unknown keys are refused.
 #[derive(Debug, Clone, Deserialize, Serialize)]
@@ -232,6 +235,9 @@ pub struct Params {
     /// `none` (pieces as flattened), or a 3D direction `[x, y, z]`.
     #[serde(default)]
     pub grain: finish::Grain,
+    /// Width of the fabric roll for the cost estimate, in the drawing unit (default 1500 mm).
+    #[serde(default)]
+    pub fabric_width: Option<f64>,
 }
 
 impl Default for Params {
@@ -254,6 +260,7 @@ impl Default for Params {
             mitre_limit: default_mitre_limit(),
             notch_spacing: None,
             grain: finish::Grain::Up,
+            fabric_width: None,
         }
     }
 }
@@ -299,6 +306,14 @@ impl Params {
         length("seam_allowance", self.seam_allowance, 0.0)?;
         length("hem_allowance", self.hem_allowance, 0.0)?;
         length("notch_spacing", self.notch_spacing, 1.0)?;
+        if let Some(w) = self.fabric_width {
+            if !(w.is_finite() && w > 0.0 && w * mm <= 100_000.0) {
+                return Err(AlgoError::InvalidParam {
+                    key: "fabric_width".into(),
+                    message: format!("must be in (0, {}] {unit}, got {w}", 100_000.0 / mm),
+                });
+            }
+        }
         for (k, o) in self.seam_allowances.iter().enumerate() {
             length(
                 &format!("seam_allowances[{k}].allowance"),
@@ -322,6 +337,12 @@ impl Params {
             }
         }
         Ok(())
+    }
+
+    /// The roll width of the cost estimate, in the drawing unit.
+    pub fn fabric_width(&self) -> f64 {
+        let mm = crate::pattern::mm_per(self.unit.name()).unwrap_or(1.0);
+        self.fabric_width.unwrap_or(DEFAULT_FABRIC_WIDTH_MM / mm)
     }
 
     /// Grain, notches and allowances in mesh units for a mesh in `input_unit`.
@@ -972,6 +993,8 @@ pub struct Summary {
     pub job_warnings: Vec<String>,
     /// Every piece's LPFB converged.
     pub all_converged: bool,
+    /// Piece area, cut-line length and the fabric a simple marker needs.
+    pub cost: marker::Cost,
     /// Seconds per stage.
     pub timings: Timings,
 }
@@ -1116,6 +1139,7 @@ pub fn run(
         seams: seams.iter().map(SeamSummary::from).collect(),
         job_warnings,
         all_converged: infos.iter().all(|i| i.converged),
+        cost: marker::Cost::default(),
         timings: Timings {
             topology_s: t_topo,
             lpfb_s: infos.iter().map(|i| i.seconds_lpfb).sum(),
@@ -1136,9 +1160,23 @@ pub fn run(
         finish::apply(&mut patterns, mesh.positions(), &params.finish(input_unit));
     let mut summary = summary;
     summary.job_warnings.extend(finish_warnings);
+    summary.cost = marker::estimate(&patterns, params.fabric_width());
+    if !summary.cost.too_wide.is_empty() {
+        summary.job_warnings.push(format!(
+            "pieces wider than the fabric ({} {}): {}; no fabric length estimated",
+            params.fabric_width(),
+            params.unit.name(),
+            summary.cost.too_wide.join(", ")
+        ));
+    }
     let mesh = patterns
         .uv_layer(mesh.num_faces())
         .and_then(|uv| mesh.with_uv(uv).ok());
+    if mesh.is_none() {
+        summary.job_warnings.push(
+            "the output mesh has no texture coordinates: some of its faces are in no piece".into(),
+        );
+    }
     Ok(Outcome {
         mesh,
         patterns: Some(patterns),

@@ -461,6 +461,7 @@ pub fn run(
         let warnings =
             flatten::finish::apply(patterns, cut_mesh.positions(), &final_flatten.finish(unit));
         flat.summary.job_warnings.extend(warnings);
+        flat.summary.cost = flatten::marker::estimate(patterns, final_flatten.fabric_width());
         let mut seen = HashSet::new();
         flat.summary.job_warnings.retain(|w| seen.insert(w.clone()));
         if let Some(uv) = patterns.uv_layer(cut_mesh.num_faces()) {
