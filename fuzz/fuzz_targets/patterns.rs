@@ -25,5 +25,7 @@ fuzz_target!(|data: &[u8]| {
         let _ = io::pattern::to_svg(p);
         let dxf = io::pattern::to_dxf(p);
         io::pattern::read_dxf_polylines(&dxf).expect("our own DXF reads back");
+        let plain = io::pattern::to_dxf_plain(p);
+        io::pattern::read_dxf_polylines(&plain).expect("our own plain DXF reads back");
     }
 });

@@ -151,11 +151,31 @@ pub fn to_svg(p: &Patterns) -> String {
                 a.1 - h
             );
         }
-        if let Some(c) = centroid(&pc.uv) {
+        // The name beside the grain line (or at the centroid), no taller than a tenth of the
+        // piece, so that small pieces' names do not run into each other.
+        let (lo, hi) = pc
+            .uv
+            .iter()
+            .fold(([f64::MAX; 2], [f64::MIN; 2]), |(lo, hi), q| {
+                (
+                    [lo[0].min(q[0]), lo[1].min(q[1])],
+                    [hi[0].max(q[0]), hi[1].max(q[1])],
+                )
+            });
+        let size = font
+            .min(0.1 * (hi[0] - lo[0]).max(hi[1] - lo[1]) * s)
+            .max(f64::MIN_POSITIVE);
+        let anchor = pc
+            .grain
+            .map(|[a, b]| ([(a[0] + b[0]) / 2.0, (a[1] + b[1]) / 2.0], "start"))
+            .or_else(|| centroid(&pc.uv).map(|c| (c, "middle")));
+        if let Some((c, how)) = anchor {
             let (x, y) = pt(i, c);
+            let dx = if how == "start" { size * 0.4 } else { 0.0 };
             let _ = writeln!(
                 out,
-                r#"<text x="{x}" y="{y}" font-size="{font}" text-anchor="middle">{}</text>"#,
+                r#"<text x="{}" y="{y}" font-size="{size}" text-anchor="{how}">{}</text>"#,
+                x + dx,
                 esc(&pc.patch)
             );
         }
@@ -173,10 +193,13 @@ pub fn to_svg(p: &Patterns) -> String {
             let e = edges[edges.len() / 2];
             let (a, b) = (pc.uv[e[0] as usize], pc.uv[e[1] as usize]);
             let (x, y) = pt(pi, [(a[0] + b[0]) / 2.0, (a[1] + b[1]) / 2.0]);
+            // No larger than half the seam, so that short seams' labels stay apart.
+            let size = (font * 0.7)
+                .min(0.5 * sm.lengths[side] * s)
+                .max(f64::MIN_POSITIVE);
             let _ = writeln!(
                 out,
-                r#"<text x="{x}" y="{y}" font-size="{}" text-anchor="middle">S{k}</text>"#,
-                font * 0.7
+                r#"<text x="{x}" y="{y}" font-size="{size}" text-anchor="middle">S{k}</text>"#
             );
         }
     }
