@@ -728,3 +728,39 @@ fn the_svg_pieces_fit_the_page_and_do_not_overlap() {
         assert_eq!(overlap, 0, "{name}: pieces overlap on {overlap} pixels");
     }
 }
+
+#[test]
+fn the_cost_estimate_adds_up_for_two_rectangles() {
+    // Two 200 × 300 mm panels with a 10 mm allowance all round: each cut piece is 220 × 320.
+    let mesh = rectangle(0.4, 0.3, 8, 6, 0.5, 0.0);
+    let run = |width: f64| {
+        let p: Params =
+            serde_json::from_value(serde_json::json!({"input_unit": "m", "fabric_width": width}))
+                .unwrap();
+        flatten::run(&mesh, &p, &Silent::default()).unwrap().summary
+    };
+    let s = run(1500.0);
+    let c = &s.cost;
+    assert_eq!(c.unit, "mm");
+    assert!((c.piece_area - 2.0 * 220.0 * 320.0).abs() < 1e-6, "{c:?}");
+    assert!(
+        (c.cut_length - 2.0 * 2.0 * (220.0 + 320.0)).abs() < 1e-6,
+        "{c:?}"
+    );
+    // Side by side on one shelf of a 1500 mm roll.
+    assert!((c.fabric_length.unwrap() - 320.0).abs() < 1e-6, "{c:?}");
+    let want = 100.0 * 140_800.0 / (1500.0 * 320.0);
+    assert!((c.utilisation_pct.unwrap() - want).abs() < 1e-6);
+    assert!((c.length_bound - 140_800.0 / 1500.0).abs() < 1e-6);
+    // A 300 mm roll takes one piece per shelf.
+    let c = run(300.0).cost;
+    assert!((c.fabric_length.unwrap() - 640.0).abs() < 1e-6, "{c:?}");
+    // A 200 mm roll is narrower than either piece: no length, and the job says so.
+    let s = run(200.0);
+    assert_eq!(s.cost.fabric_length, None);
+    assert_eq!(s.cost.too_wide.len(), 2);
+    assert!(s
+        .job_warnings
+        .iter()
+        .any(|w| w.contains("wider than the fabric")));
+}
