@@ -755,12 +755,9 @@ fn the_cost_estimate_adds_up_for_two_rectangles() {
     // A 300 mm roll takes one piece per shelf.
     let c = run(300.0).cost;
     assert!((c.fabric_length.unwrap() - 640.0).abs() < 1e-6, "{c:?}");
-    // A 200 mm roll is narrower than either piece: no length, and the job says so.
+    // A 200 mm roll is narrower than either piece: no length, both named.
     let s = run(200.0);
     assert_eq!(s.cost.fabric_length, None);
-    assert_eq!(s.cost.too_wide.len(), 2);
-    assert!(s
-        .job_warnings
-        .iter()
-        .any(|w| w.contains("wider than the fabric")));
+    assert_eq!(s.cost.utilisation_pct, None);
+    assert_eq!(s.cost.too_wide, ["left", "right"]);
 }

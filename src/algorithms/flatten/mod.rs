@@ -1160,15 +1160,9 @@ pub fn run(
         finish::apply(&mut patterns, mesh.positions(), &params.finish(input_unit));
     let mut summary = summary;
     summary.job_warnings.extend(finish_warnings);
+    // A piece wider than the roll is named in the estimate (`too_wide`), not warned about:
+    // the pieces themselves are fine.
     summary.cost = marker::estimate(&patterns, params.fabric_width());
-    if !summary.cost.too_wide.is_empty() {
-        summary.job_warnings.push(format!(
-            "pieces wider than the fabric ({} {}): {}; no fabric length estimated",
-            params.fabric_width(),
-            params.unit.name(),
-            summary.cost.too_wide.join(", ")
-        ));
-    }
     let mesh = patterns
         .uv_layer(mesh.num_faces())
         .and_then(|uv| mesh.with_uv(uv).ok());
