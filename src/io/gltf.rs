@@ -23,10 +23,11 @@
 //! (and, for `perturb`, `_DISPLACEMENT`: a [`VertexScalar`]), in the mesh's vertex order, and one primitive per patch with its own indices, so that a
 //! written file reads back with the same vertex numbering and patches. A mesh with texture
 //! coordinates (a flattened one: each corner at its point in the pattern drawing) is written
-//! with TEXCOORD_0 instead as one vertex set per patch, a vertex once per coordinate it has
-//! there; reading welds the patches back together along their seams (a real cut inside a
-//! patch stays open: OBJ keeps the exact connectivity). TEXCOORD_0 is read back into the
-//! mesh's texture coordinates (v flipped, glTF's origin being the top left). glTF stores positions
+//! with TEXCOORD_0; when a vertex has several coordinates (pieces meet, or a real cut), as one
+//! vertex set per patch, a vertex once per coordinate it has there, with `_VERTEX_ID` naming
+//! the mesh vertex each copy is; reading joins the copies by it (the mesh's own numbering and
+//! connectivity again; a file without it is welded as before). TEXCOORD_0 is read back into
+//! the mesh's texture coordinates (v flipped, glTF's origin being the top left). glTF stores positions
 //! as f32; use OBJ when full f64 precision matters. The JSON is built with `serde_json` and the
 //! GLB container (a 12-byte header and two padded chunks) is written here, which keeps the
 //! alignment rules in plain sight.
@@ -626,6 +627,21 @@ fn assemble(
             patch_names.push(name);
             let uv_base = match prim.get(&gltf::Semantic::TexCoords(0)) {
                 None => None,
+                // Non-indexed corners were joined by position above, so their coordinates
+                // (one per corner) no longer line up: not read.
+                Some(_) if indexed.is_none() => {
+                    uv_problem.get_or_insert(format!(
+                        "{where_}: texture coordinates of a non-indexed primitive are not read"
+                    ));
+                    None
+                }
+                Some(acc) if acc.count() != nverts => {
+                    uv_problem.get_or_insert(format!(
+                        "{where_}: TEXCOORD_0 has {} elements for {nverts} vertices",
+                        acc.count()
+                    ));
+                    None
+                }
                 Some(acc) => match uv_read.get(&acc.index()) {
                     Some(&b) => Some((b, acc.count())),
                     None => match read_texcoords(&acc, buffers, nverts, limits, uv_coords.len()) {

@@ -228,8 +228,9 @@ fn centroid(uv: &[[f64; 2]]) -> Option<[f64; 2]> {
 }
 
 /// A DXF layer name for a piece: `P<i>_` and the patch name with characters outside
-/// `[A-Za-z0-9_-]` replaced by `_`.
+/// `[A-Za-z0-9_-]` replaced by `_`, 31 characters at most (R12's limit; unique through i).
 pub fn layer_name(i: usize, patch: &str) -> String {
+    let head = format!("P{i}_");
     let clean: String = patch
         .chars()
         .map(|c| {
@@ -239,9 +240,26 @@ pub fn layer_name(i: usize, patch: &str) -> String {
                 '_'
             }
         })
-        .take(200)
+        .take(31usize.saturating_sub(head.len()))
         .collect();
-    format!("P{i}_{clean}")
+    format!("{head}{clean}")
+}
+
+/// Text for a DXF TEXT entity: one line, ASCII (others as `\U+XXXX`, as AutoCAD writes
+/// them), `%` doubled into `%%%` so that it is not read as a control code.
+fn dxf_text(t: &str) -> String {
+    let mut out = String::new();
+    for c in t.chars().take(250) {
+        match c {
+            '%' => out.push_str("%%%"),
+            c if c.is_control() || c == '\u{2028}' || c == '\u{2029}' => out.push(' '),
+            c if c.is_ascii() => out.push(c),
+            c => {
+                let _ = write!(out, "\\U+{:04X}", c as u32);
+            }
+        }
+    }
+    out
 }
 
 /// `patterns-plain.dxf` (`format=dxf-plain`): ASCII DXF R12; each boundary loop (sew line) of
@@ -378,7 +396,7 @@ pub fn to_dxf(p: &Patterns) -> String {
         );
     };
     let text = |o: &mut String, layer: &str, at: [f64; 2], height: f64, t: &str| {
-        let clean: String = t.chars().filter(|c| !c.is_control()).take(250).collect();
+        let clean = dxf_text(t);
         let _ = write!(
             o,
             "0\nTEXT\n8\n{layer}\n10\n{}\n20\n{}\n30\n0\n40\n{height}\n1\n{clean}\n",
@@ -419,6 +437,16 @@ pub fn to_dxf(p: &Patterns) -> String {
     }
     pair(&mut o, 0, "ENDTAB");
     pair(&mut o, 0, "ENDSEC");
+    let mut seams_of: Vec<Vec<usize>> = vec![Vec::new(); p.pieces.len()];
+    for (k, sm) in p.seams.iter().enumerate() {
+        for side in 0..2 {
+            if let Some(list) = seams_of.get_mut(sm.pieces[side]) {
+                if list.last() != Some(&k) {
+                    list.push(k);
+                }
+            }
+        }
+    }
     pair(&mut o, 0, "SECTION");
     pair(&mut o, 2, "BLOCKS");
     for (i, pc) in p.pieces.iter().enumerate() {
@@ -500,11 +528,9 @@ pub fn to_dxf(p: &Patterns) -> String {
             text_h,
             "Quantity: 1",
         );
-        let seams: Vec<String> = p
-            .seams
+        let seams: Vec<String> = seams_of[i]
             .iter()
-            .enumerate()
-            .filter(|(_, sm)| sm.pieces.contains(&i))
+            .map(|&k| (k, &p.seams[k]))
             .map(|(k, sm)| {
                 let other = if sm.pieces[0] == i {
                     &sm.patches[1]

@@ -108,7 +108,8 @@ pub struct Finish {
     pub hem_allowance: f64,
     /// Per patch pair.
     pub overrides: Vec<([String; 2], f64)>,
-    /// Largest distance of a corner of the cut line from its sew-line corner, in allowances.
+    /// A mitre reaching further than this many allowances from its sew-line corner, measured
+    /// along the corner's bisector, is squared off there.
     pub mitre_limit: f64,
     /// Arc length between notches along a seam; 0 puts them at the ends only.
     pub notch_spacing: f64,
@@ -143,15 +144,22 @@ pub fn apply(p: &mut Patterns, positions: &[[f64; 3]], f: &Finish) -> Vec<String
             limit,
         );
         let cut = &pc.cut_lines;
+        // The cut line is at most `limit` allowances out (and may round ~1e-12 inside).
+        let reach = limit
+            * f.seam_allowance
+                .max(f.hem_allowance)
+                .max(f.overrides.iter().map(|o| o.1).fold(0.0, f64::max));
         for n in &mut pc.notches {
-            n.cut_at = out_to(cut, n.at, [-n.inward[0], -n.inward[1]]).unwrap_or(n.at);
+            n.cut_at = out_to(cut, n.at, [-n.inward[0], -n.inward[1]], reach).unwrap_or(n.at);
         }
     }
     warnings
 }
 
-/// The first point where the ray from `p` along `d` crosses one of the polygons.
-fn out_to(polys: &[Vec<[f64; 2]>], p: [f64; 2], d: [f64; 2]) -> Option<[f64; 2]> {
+/// The first point where the ray from `p` along `d` crosses one of the polygons, no further
+/// than `reach` (a hit up to 1e-9 × reach behind `p` counts: rounding).
+fn out_to(polys: &[Vec<[f64; 2]>], p: [f64; 2], d: [f64; 2], reach: f64) -> Option<[f64; 2]> {
+    let slack = 1e-9 * reach;
     let mut best: Option<f64> = None;
     for poly in polys {
         let n = poly.len();
@@ -165,8 +173,12 @@ fn out_to(polys: &[Vec<[f64; 2]>], p: [f64; 2], d: [f64; 2]) -> Option<[f64; 2]>
             let r = sub2(a, p);
             let s = cross2(r, e) / den;
             let u = cross2(r, d) / den;
-            if s >= 0.0 && (0.0..=1.0).contains(&u) && best.is_none_or(|b| s < b) {
-                best = Some(s);
+            if s >= -slack
+                && s <= reach + slack
+                && (0.0..=1.0).contains(&u)
+                && best.is_none_or(|b| s < b)
+            {
+                best = Some(s.max(0.0));
             }
         }
     }
@@ -508,16 +520,23 @@ fn inward(pc: &Piece, third: &HashMap<(u32, u32), u32>, e: [u32; 2]) -> [f64; 2]
 
 /// Allowance (mesh units) of each seam edge, by (piece, lower uv vertex, higher uv vertex).
 fn edge_allowances(p: &Patterns, f: &Finish) -> HashMap<(usize, u32, u32), f64> {
+    let key = |a: &str, b: &str| {
+        if a <= b {
+            (a.to_string(), b.to_string())
+        } else {
+            (b.to_string(), a.to_string())
+        }
+    };
+    let mut by_pair: HashMap<(String, String), f64> = HashMap::new();
+    for (pair, a) in &f.overrides {
+        by_pair.entry(key(&pair[0], &pair[1])).or_insert(*a);
+    }
     let mut out = HashMap::new();
     for seam in &p.seams {
-        let a = f
-            .overrides
-            .iter()
-            .find(|(pair, _)| {
-                (pair[0] == seam.patches[0] && pair[1] == seam.patches[1])
-                    || (pair[0] == seam.patches[1] && pair[1] == seam.patches[0])
-            })
-            .map_or(f.seam_allowance, |o| o.1);
+        let a = by_pair
+            .get(&key(&seam.patches[0], &seam.patches[1]))
+            .copied()
+            .unwrap_or(f.seam_allowance);
         for side in 0..2 {
             for e in &seam.edges[side] {
                 out.insert((seam.pieces[side], e[0].min(e[1]), e[0].max(e[1])), a);
@@ -551,23 +570,35 @@ fn cut_lines(pc: &Piece, allowance: &dyn Fn(u32, u32) -> f64, limit: f64) -> Vec
         if 2 * left < n {
             lp.reverse();
         }
-        let q = |k: usize| pc.uv[lp[k % n] as usize];
-        shapes.push(((0..n).map(q).collect(), true));
-        let mut normal = Vec::with_capacity(n);
-        let mut dist = Vec::with_capacity(n);
-        for k in 0..n {
-            let (a, b) = (q(k), q(k + 1));
+        // The offset is built on the sew line without zero-length edges, simplified within
+        // SIMPLIFY × allowance where the allowance does not change; the piece itself enters
+        // the union as that simplified loop too, so that its edges are the rectangles' own
+        // (the exact sew line is within SIMPLIFY × w of it, inside the allowance).
+        let (pts, dist) = simplified(
+            lp.iter().map(|&v| pc.uv[v as usize]).collect(),
+            (0..n)
+                .map(|k| allowance(lp[k], lp[(k + 1) % n]).max(0.0))
+                .collect(),
+        );
+        let m = pts.len();
+        if m < 3 {
+            continue;
+        }
+        shapes.push((pts.clone(), true));
+        let mut normal = Vec::with_capacity(m);
+        for k in 0..m {
+            let (a, b) = (pts[k], pts[(k + 1) % m]);
             let d = sub2(b, a);
             let l = len2(d);
+            // (A loop touching itself can leave two equal points after simplification.)
             let nr = if l > 0.0 {
                 [d[1] / l, -d[0] / l]
             } else {
                 [0.0, 0.0]
             };
-            let w = allowance(lp[k], lp[(k + 1) % n]).max(0.0);
+            let w = dist[k];
             reach = reach.max(w);
             normal.push(nr);
-            dist.push(w);
             if w > 0.0 && l > 0.0 {
                 let rect = vec![
                     a,
@@ -578,9 +609,9 @@ fn cut_lines(pc: &Piece, allowance: &dyn Fn(u32, u32) -> f64, limit: f64) -> Vec
                 shapes.push((rect, false));
             }
         }
-        for k in 0..n {
-            let j = (k + n - 1) % n;
-            if let Some(join) = corner(q(k), normal[j], dist[j], normal[k], dist[k], limit) {
+        for k in 0..m {
+            let j = (k + m - 1) % m;
+            if let Some(join) = corner(pts[k], normal[j], dist[j], normal[k], dist[k], limit) {
                 shapes.push((join, false));
             }
         }
@@ -589,6 +620,90 @@ fn cut_lines(pc: &Piece, allowance: &dyn Fn(u32, u32) -> f64, limit: f64) -> Vec
         return Vec::new();
     }
     union(shapes)
+}
+
+/// A sew line's tolerance for simplification before offsetting, relative to the allowance:
+/// the cut line is within 0.1 % of the allowance of the exact offset, and a tight concave
+/// curve keeps a few dozen vertices (its rectangles all cross each other, so the union's
+/// work grows with their square).
+pub const SIMPLIFY: f64 = 1e-3;
+
+/// A closed sew line (points, and each edge's allowance) without zero-length edges, and
+/// simplified (Douglas–Peucker within [`SIMPLIFY`] × the allowance) along each run of edges
+/// with one allowance; where the allowance changes, and on runs without allowance, every
+/// vertex is kept.
+fn simplified(pts: Vec<[f64; 2]>, dist: Vec<f64>) -> (Vec<[f64; 2]>, Vec<f64>) {
+    // Zero-length edges: drop the repeated point (and its edge).
+    let n = pts.len();
+    let (mut p, mut d) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    for k in 0..n {
+        if pts[k] != pts[(k + 1) % n] {
+            p.push(pts[k]);
+            d.push(dist[k]);
+        }
+    }
+    let n = p.len();
+    if n < 3 {
+        return (p, d);
+    }
+    // Anchors: where the allowance changes; a loop with one allowance gets two.
+    let mut keep = vec![false; n];
+    let mut anchors: Vec<usize> = (0..n).filter(|&k| d[k] != d[(k + n - 1) % n]).collect();
+    if anchors.is_empty() {
+        let far = (0..n)
+            .max_by(|&a, &b| len2(sub2(p[a], p[0])).total_cmp(&len2(sub2(p[b], p[0]))))
+            .unwrap_or(0);
+        anchors = vec![0, far];
+        anchors.sort_unstable();
+        anchors.dedup();
+    }
+    for &a in &anchors {
+        keep[a] = true;
+    }
+    for (i, &a) in anchors.iter().enumerate() {
+        let b = anchors[(i + 1) % anchors.len()];
+        let eps = SIMPLIFY * d[a];
+        let len = (b + n - a) % n;
+        let len = if len == 0 { n } else { len };
+        if eps <= 0.0 {
+            for k in 0..len {
+                keep[(a + k) % n] = true;
+            }
+            continue;
+        }
+        // Douglas–Peucker on the run a → b, iteratively.
+        let mut stack = vec![(0usize, len)];
+        while let Some((s, e)) = stack.pop() {
+            let (ps, pe) = (p[(a + s) % n], p[(a + e) % n]);
+            let chord = sub2(pe, ps);
+            let cl = len2(chord);
+            let mut worst = (0.0f64, s);
+            for k in s + 1..e {
+                let q = sub2(p[(a + k) % n], ps);
+                let dk = if cl > 0.0 {
+                    cross2(chord, q).abs() / cl
+                } else {
+                    len2(q)
+                };
+                if dk > worst.0 {
+                    worst = (dk, k);
+                }
+            }
+            if worst.0 > eps {
+                keep[(a + worst.1) % n] = true;
+                stack.push((s, worst.1));
+                stack.push((worst.1, e));
+            }
+        }
+    }
+    let (mut sp, mut sd) = (Vec::new(), Vec::new());
+    for k in 0..n {
+        if keep[k] {
+            sp.push(p[k]);
+            sd.push(d[k]);
+        }
+    }
+    (sp, sd)
 }
 
 /// The join at a convex corner v between an edge arriving with outward normal n1 at allowance
@@ -635,7 +750,12 @@ fn corner(
         let alpha = cross2(sub2(p2, p1), t2) / turn;
         vec![v, p1, [p1[0] + alpha * t1[0], p1[1] + alpha * t1[1]], p2]
     };
+    // Within the corner's sector (past the end of the first edge, before the start of the
+    // second): where the allowance changes at a shallow turn the offset lines meet far
+    // along one edge, and the join is then a square step.
     let clipped = clip_half_plane(&wedge, v, bisector, cap);
+    let clipped = clip_half_plane(&clipped, v, [-t1[0], -t1[1]], 0.0);
+    let clipped = clip_half_plane(&clipped, v, t2, 0.0);
     (clipped.len() >= 3).then_some(clipped)
 }
 
@@ -706,7 +826,9 @@ fn union(shapes: Vec<(Vec<[f64; 2]>, bool)>) -> Vec<Vec<[f64; 2]>> {
             let poly: Vec<[f64; 2]> = p.iter().map(from).collect();
             (signed_area(&poly), poly)
         })
-        .filter(|(a, _)| *a != 0.0)
+        // Slivers of no area are rounding where the sew line's own vertices meet the
+        // rectangles built on its simplified copy.
+        .filter(|(a, _)| a.abs() > 1e-9 * extent * extent)
         .collect();
     out.sort_by(|a, b| {
         (b.0 > 0.0)

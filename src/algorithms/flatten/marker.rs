@@ -10,6 +10,9 @@
 use crate::pattern::{Patterns, Piece};
 use serde::Serialize;
 
+/// Most pieces packed first-fit (quadratic); beyond, next-fit.
+pub const FIRST_FIT_MAX: usize = 2000;
+
 /// The estimate, in drawing units.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct Cost {
@@ -102,10 +105,18 @@ pub fn estimate(p: &Patterns, fabric_width: f64) -> Cost {
         return cost;
     }
     // First-fit decreasing height: each box on the first shelf with room, else a new shelf.
+    // Past FIRST_FIT_MAX pieces, next-fit (the last shelf only), which is linear.
     boxes.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let first_fit = boxes.len() <= FIRST_FIT_MAX;
     let mut shelves: Vec<(f64, f64)> = Vec::new(); // (used width, height)
     for (w, h, _) in boxes {
-        match shelves.iter_mut().find(|sh| sh.0 + w <= fabric_width) {
+        let room = |sh: &&mut (f64, f64)| sh.0 + w <= fabric_width;
+        let found = if first_fit {
+            shelves.iter_mut().find(room)
+        } else {
+            shelves.last_mut().filter(|sh| sh.0 + w <= fabric_width)
+        };
+        match found {
             Some(sh) => sh.0 += w,
             None => shelves.push((w, h)),
         }

@@ -314,6 +314,12 @@ impl Params {
                 });
             }
         }
+        if self.seam_allowances.len() > 10_000 {
+            return Err(AlgoError::InvalidParam {
+                key: "seam_allowances".into(),
+                message: format!("at most 10000 entries, got {}", self.seam_allowances.len()),
+            });
+        }
         for (k, o) in self.seam_allowances.iter().enumerate() {
             length(
                 &format!("seam_allowances[{k}].allowance"),
