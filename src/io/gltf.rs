@@ -1244,17 +1244,19 @@ fn vertex_sets(mesh: &Mesh) -> Vec<VertexSet> {
     for (f, &p) in mesh.face_patch().iter().enumerate() {
         by_patch[p as usize].push(f);
     }
+    // Every mesh vertex in mesh order, one primitive per patch.
+    let shared = |uv: Option<Vec<[f64; 2]>>| VertexSet {
+        vertices: (0..mesh.num_vertices() as u32).collect(),
+        uv,
+        patches: by_patch
+            .iter()
+            .enumerate()
+            .filter(|(_, fs)| !fs.is_empty())
+            .map(|(p, fs)| (p, fs.iter().flat_map(|&f| mesh.triangles()[f]).collect()))
+            .collect(),
+    };
     let Some(uv) = mesh.uv() else {
-        return vec![VertexSet {
-            vertices: (0..mesh.num_vertices() as u32).collect(),
-            uv: None,
-            patches: by_patch
-                .iter()
-                .enumerate()
-                .filter(|(_, fs)| !fs.is_empty())
-                .map(|(p, fs)| (p, fs.iter().flat_map(|&f| mesh.triangles()[f]).collect()))
-                .collect(),
-        }];
+        return vec![shared(None)];
     };
     // Every vertex with one texture coordinate (by value): the shared layout still fits.
     let mut per_vertex: Vec<Option<[f64; 2]>> = vec![None; mesh.num_vertices()];
@@ -1269,16 +1271,9 @@ fn vertex_sets(mesh: &Mesh) -> Vec<VertexSet> {
         }
     }
     if single {
-        return vec![VertexSet {
-            vertices: (0..mesh.num_vertices() as u32).collect(),
-            uv: Some(per_vertex.iter().map(|c| c.unwrap_or([0.0; 2])).collect()),
-            patches: by_patch
-                .iter()
-                .enumerate()
-                .filter(|(_, fs)| !fs.is_empty())
-                .map(|(p, fs)| (p, fs.iter().flat_map(|&f| mesh.triangles()[f]).collect()))
-                .collect(),
-        }];
+        return vec![shared(Some(
+            per_vertex.iter().map(|c| c.unwrap_or([0.0; 2])).collect(),
+        ))];
     }
     let mut sets = Vec::new();
     for (p, faces) in by_patch.iter().enumerate() {

@@ -777,7 +777,8 @@ fn clip_half_plane(poly: &[[f64; 2]], v: [f64; 2], b: [f64; 2], c: f64) -> Vec<[
     out
 }
 
-fn signed_area(poly: &[[f64; 2]]) -> f64 {
+/// Signed area of a closed polygon (positive counter-clockwise).
+pub(crate) fn signed_area(poly: &[[f64; 2]]) -> f64 {
     let n = poly.len();
     (0..n)
         .map(|k| cross2(poly[k], poly[(k + 1) % n]))

@@ -7,6 +7,7 @@
 //! quick upper bound, not a nesting: real markers interlock pieces. How close it comes to the
 //! area bound (Σ area / width) is reported as the utilisation.
 
+use super::finish::signed_area;
 use crate::pattern::{Patterns, Piece};
 use serde::Serialize;
 
@@ -43,17 +44,6 @@ fn outline(pc: &Piece) -> Vec<Vec<[f64; 2]>> {
     } else {
         pc.cut_lines.clone()
     }
-}
-
-fn signed_area(poly: &[[f64; 2]]) -> f64 {
-    let n = poly.len();
-    (0..n)
-        .map(|k| {
-            let (a, b) = (poly[k], poly[(k + 1) % n]);
-            a[0] * b[1] - a[1] * b[0]
-        })
-        .sum::<f64>()
-        / 2.0
 }
 
 /// The estimate for a roll `fabric_width` wide (drawing units).
