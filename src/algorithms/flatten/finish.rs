@@ -24,6 +24,10 @@ use clipper2_rust::{FillRule, Path64, Paths64, Point64};
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 
+/// Notches × cut-line vertices of a piece above which a notch's point on the cut line is
+/// taken straight out by its allowance instead of found by a ray (bounds the time).
+pub const MAX_RAY_WORK: usize = 20_000_000;
+
 /// Most notches on one seam: a spacing that would put more is widened.
 pub const MAX_NOTCHES_PER_SEAM: f64 = 10_000.0;
 
@@ -143,17 +147,44 @@ pub fn apply(p: &mut Patterns, positions: &[[f64; 3]], f: &Finish) -> Vec<String
             },
             limit,
         );
-        let cut = &pc.cut_lines;
         // The cut line is at most `limit` allowances out (and may round ~1e-12 inside).
         let reach = limit
             * f.seam_allowance
                 .max(f.hem_allowance)
                 .max(f.overrides.iter().map(|o| o.1).fold(0.0, f64::max));
-        for n in &mut pc.notches {
-            n.cut_at = out_to(cut, n.at, [-n.inward[0], -n.inward[1]], reach).unwrap_or(n.at);
-        }
+        let allowance_of = |e: [u32; 2]| {
+            allowances
+                .get(&(i, e[0].min(e[1]), e[0].max(e[1])))
+                .copied()
+                .unwrap_or(f.hem_allowance)
+        };
+        place_on_cut_line(pc, &allowance_of, reach, MAX_RAY_WORK);
     }
     warnings
+}
+
+/// Each notch's point on the cut line: its ray out against the whole cut line, unless that is
+/// more than `max_work` segment tests (a piece with a hostile number of seams): then straight
+/// out by its edge's allowance, which is the same point along a straight run.
+fn place_on_cut_line(
+    pc: &mut Piece,
+    allowance_of: &dyn Fn([u32; 2]) -> f64,
+    reach: f64,
+    max_work: usize,
+) {
+    let cut = &pc.cut_lines;
+    let work = pc.notches.len() * cut.iter().map(Vec::len).sum::<usize>();
+    for n in &mut pc.notches {
+        let out = [-n.inward[0], -n.inward[1]];
+        n.cut_at = if cut.is_empty() {
+            n.at
+        } else if work <= max_work {
+            out_to(cut, n.at, out, reach).unwrap_or(n.at)
+        } else {
+            let w = allowance_of(n.edge);
+            [n.at[0] + w * out[0], n.at[1] + w * out[1]]
+        };
+    }
 }
 
 /// The first point where the ray from `p` along `d` crosses one of the polygons, no further
@@ -837,4 +868,47 @@ fn union(shapes: Vec<(Vec<[f64; 2]>, bool)>) -> Vec<Vec<[f64; 2]>> {
             .then(b.0.abs().total_cmp(&a.0.abs()))
     });
     out.into_iter().map(|(_, p)| p).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The bounded fallback puts a notch where the ray does along a straight run.
+    #[test]
+    fn notches_straight_out_agree_with_the_ray_on_straight_edges() {
+        // A 4 × 2 rectangle piece (two triangles), allowance 0.5, notches mid-edge.
+        let mut pc = Piece {
+            uv: vec![[0.0, 0.0], [4.0, 0.0], [4.0, 2.0], [0.0, 2.0]],
+            triangles: vec![[0, 1, 2], [0, 2, 3]],
+            boundary_loops: vec![vec![0, 1, 2, 3]],
+            ..Piece::default()
+        };
+        pc.cut_lines = cut_lines(&pc, &|_, _| 0.5, 3.0);
+        let third = opposite(&pc);
+        for k in 0..4u32 {
+            let e = [k, (k + 1) % 4];
+            let (a, b) = (pc.uv[e[0] as usize], pc.uv[e[1] as usize]);
+            let at = [(a[0] + b[0]) / 2.0, (a[1] + b[1]) / 2.0];
+            pc.notches.push(Notch {
+                edge: e,
+                t: 0.5,
+                at,
+                inward: inward(&pc, &third, e),
+                cut_at: at,
+                ..Notch::default()
+            });
+        }
+        let mut by_ray = pc.clone();
+        place_on_cut_line(&mut by_ray, &|_| 0.5, 1.5, usize::MAX);
+        place_on_cut_line(&mut pc, &|_| 0.5, 1.5, 0);
+        for (a, b) in by_ray.notches.iter().zip(&pc.notches) {
+            assert!(
+                (a.cut_at[0] - b.cut_at[0]).abs() < 1e-9
+                    && (a.cut_at[1] - b.cut_at[1]).abs() < 1e-9
+            );
+            let d = ((a.cut_at[0] - a.at[0]).powi(2) + (a.cut_at[1] - a.at[1]).powi(2)).sqrt();
+            assert!((d - 0.5).abs() < 1e-9, "notch {:?} → {:?}", a.at, a.cut_at);
+        }
+    }
 }
