@@ -19,6 +19,7 @@
 //!   spans 2⁴² units: a straight edge's cut line lies at its allowance to ~1e-12 of the piece's
 //!   size (i_overlay works on a 32-bit grid, ~1e-9). The result is a set of simple polygons.
 
+use super::cut::dist;
 use crate::pattern::{Notch, Patterns, Piece};
 use clipper2_rust::{FillRule, Path64, Paths64, Point64};
 use serde::{Deserialize, Serialize};
@@ -227,9 +228,6 @@ fn cross2(a: [f64; 2], b: [f64; 2]) -> f64 {
 }
 fn len2(a: [f64; 2]) -> f64 {
     dot2(a, a).sqrt()
-}
-fn dist3(a: [f64; 3], b: [f64; 3]) -> f64 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
 
 /// Area-weighted centroid of the piece's triangles and their total area.
@@ -443,27 +441,25 @@ fn notches(p: &mut Patterns, positions: &[[f64; 3]], spacing: f64) -> Vec<String
         };
         if closed0 {
             let k = (0..n)
-                .min_by(|&a, &b| {
-                    dist3(pos(1, w1[a][0]), p0).total_cmp(&dist3(pos(1, w1[b][0]), p0))
-                })
+                .min_by(|&a, &b| dist(pos(1, w1[a][0]), p0).total_cmp(&dist(pos(1, w1[b][0]), p0)))
                 .unwrap_or(0);
             w1.rotate_left(k);
-            if dist3(pos(1, w1[0][1]), pos(0, w0[0][1]))
-                > dist3(pos(1, w1[n - 1][0]), pos(0, w0[0][1]))
+            if dist(pos(1, w1[0][1]), pos(0, w0[0][1]))
+                > dist(pos(1, w1[n - 1][0]), pos(0, w0[0][1]))
             {
                 // Walk the loop the other way (reversed, it still starts at w1[0][0]).
                 reverse(&mut w1);
             }
-        } else if dist3(pos(1, w1[n - 1][1]), p0) < dist3(pos(1, w1[0][0]), p0) {
+        } else if dist(pos(1, w1[n - 1][1]), p0) < dist(pos(1, w1[0][0]), p0) {
             reverse(&mut w1);
         }
         let mut cum = vec![0.0];
         for (i, e) in w0.iter().enumerate() {
-            cum.push(cum[i] + dist3(pos(0, e[0]), pos(0, e[1])));
+            cum.push(cum[i] + dist(pos(0, e[0]), pos(0, e[1])));
         }
         let total = *cum.last().unwrap_or(&0.0);
         let tol = 1e-6 * total.max(f64::MIN_POSITIVE);
-        let apart = |i: usize, k: usize| dist3(pos(0, w0[i][k]), pos(1, w1[i][k])) > tol;
+        let apart = |i: usize, k: usize| dist(pos(0, w0[i][k]), pos(1, w1[i][k])) > tol;
         if (0..n).any(|i| apart(i, 0) || apart(i, 1)) {
             warnings.push(format!(
                 "seam S{s} ({} – {}): its two sides do not meet in 3D; no notches",
