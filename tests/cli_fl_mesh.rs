@@ -45,15 +45,19 @@ fn run_fl_mesh_writes_a_flattenable_mesh_and_its_report() {
     println!("defaults: {refined} vertices refined");
 }
 
-/// With a short stall window and the paper's model (no shape penalty) the t-shirt run refines
-/// (Sec. 2.3) before converging; this covers the appended vertices in mesh.obj. (Should the
-/// solver one day converge here without refining, pick another setting that refines.)
+/// With a short stall window, the paper's model (no shape penalty) and full-length normal steps
+/// (`step_radius=0`) the t-shirt run refines (Sec. 2.3) before converging; this covers the
+/// appended vertices in mesh.obj. (Should the solver one day converge here without refining,
+/// pick another setting that refines.)
 #[test]
 fn run_fl_mesh_with_refinement_appends_vertices() {
     if flatmesh::corpus::shared_root_for_tests("cli fl-mesh refinement").is_none() {
         return;
     }
-    let refined = check_run("tshirt-refine", &["stall_iterations=8", "shape_penalty=0"]);
+    let refined = check_run(
+        "tshirt-refine",
+        &["stall_iterations=8", "shape_penalty=0", "step_radius=0"],
+    );
     assert!(refined > 0, "no refinement happened");
 }
 

@@ -141,7 +141,8 @@ impl Kind {
                  tolerance (1e-6 rad), step_tolerance (1e-5), max_iterations (600), \
                  refine=true|false (true), max_refinements (3), stall_iterations (40), \
                  linear_solver=ldlt|lu (ldlt), shape_guard=true|false (false), shape_penalty \
-                 (1; 0: the paper's model), min_angle (2 degrees)"
+                 (1; 0: the paper's model), min_angle (2 degrees), step_radius (0.5 mean \
+                 edge lengths; 0: none)"
             }
             Kind::Subdivide => {
                 "levels (1; or --levels), curves (or --curves), split_ratio (0.5), \

@@ -31,6 +31,8 @@ pub(super) fn run(
         stall_iterations: params.stall_iterations,
         shape_penalty: params.shape_penalty,
         refine: false,
+        // Measured with fl-mesh's corpus only; perturb keeps the step it was measured with.
+        step_radius: 0.0,
         ..fl_mesh::Params::default()
     };
     let keep = body.map(|b| Keep {
