@@ -1203,6 +1203,8 @@ impl<'a> System<'a> {
                     // worse) and shift harder.
                     let s = fair * (TANGENT_RADIUS / tan_norm.max(TANGENT_RADIUS));
                     // The normal step is trusted over at most `step_radius` mean edge lengths.
+                    // (μ's rule below then sees the scaled length: a capped full step counts as
+                    // a shortened one; this is how it was measured.)
                     let cap = match params.step_radius {
                         r if r > 0.0 => {
                             let reach =
