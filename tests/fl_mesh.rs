@@ -304,6 +304,14 @@ fn bad_parameters_are_named() {
         Err(AlgoError::InvalidParam { key, .. }) => assert_eq!(key, "w2"),
         other => panic!("{other:?}"),
     }
+    for bad in [serde_json::json!(-0.5), serde_json::json!("far")] {
+        let mut p = serde_json::Map::new();
+        p.insert("step_radius".into(), bad);
+        match validate(&p) {
+            Err(AlgoError::InvalidParam { key, .. }) => assert_eq!(key, "step_radius"),
+            other => panic!("{other:?}"),
+        }
+    }
     let mut p = serde_json::Map::new();
     p.insert("step_rule".into(), serde_json::json!("fixed"));
     p.insert("max_iterations".into(), serde_json::json!(5));
