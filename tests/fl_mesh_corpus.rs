@@ -247,6 +247,7 @@ fn a_stalled_penalised_run_falls_back_to_the_papers_model() {
     let stages = Stages::default();
     let params = Params {
         step_radius: 0.0,
+        cone_start: fl_mesh::ConeStart::Never,
         ..Params::default()
     };
     let (out, r) = fl_mesh::solve(&mesh, &params, &stages).expect("runs");
@@ -280,6 +281,41 @@ fn a_stalled_penalised_run_falls_back_to_the_papers_model() {
         "best {} restart {restart}",
         r.best_iteration
     );
+}
+
+/// A noisy saddle, which from the input stalls or crumples, converges from the developable
+/// cone over its boundary: flattenable, no fold, no corner below 2°, boundary bit-identical,
+/// with the cone's stage reported (ϖ measured from the output's angles, not the report).
+#[test]
+fn a_noisy_saddle_converges_from_its_developable_cone() {
+    let mesh = Procedural {
+        family: Family::Saddle,
+        faces: 2_000,
+        noise: 0.01,
+    }
+    .mesh();
+    let stages = Stages::default();
+    let params = Params {
+        cone_start: fl_mesh::ConeStart::First,
+        ..Params::default()
+    };
+    let (_, w_out, converged) = check_never_worse("saddle-2000-0.01", &mesh, &params);
+    assert!(converged && w_out <= 1e-6, "ϖ_max {w_out:e}");
+    let (out, r) = fl_mesh::solve(&mesh, &params, &stages).expect("runs");
+    let m = corpus::measure(&mesh, &out);
+    assert_eq!(m.folds_out, 0);
+    assert!(
+        m.min_angle_out >= 2f64.to_radians(),
+        "{}°",
+        m.min_angle_out.to_degrees()
+    );
+    assert!(r.iterations < 60, "{} iterations", r.iterations);
+    assert!(stages
+        .0
+        .lock()
+        .unwrap()
+        .iter()
+        .any(|(s, _)| s.ends_with("from the cone")));
 }
 
 /// Records every progress report's stage and iteration.

@@ -33,6 +33,8 @@ pub(super) fn run(
         refine: false,
         // Measured with fl-mesh's corpus only; perturb keeps the step it was measured with.
         step_radius: 0.0,
+        // A perturbation stays near its input; the cone start moves a whole disk.
+        cone_start: fl_mesh::ConeStart::Never,
         ..fl_mesh::Params::default()
     };
     let keep = body.map(|b| Keep {
