@@ -29,6 +29,7 @@
 
 use crate::geometry;
 use crate::mesh::{cross, dot, sub, Mesh, VertexKind};
+use rayon::prelude::*;
 use std::f64::consts::TAU;
 
 /// Most apex lines tried (the centroid's and a stride sample of interior vertices).
@@ -110,35 +111,36 @@ pub fn cone_start(mesh: &Mesh) -> Result<Mesh, NoCone> {
         Some(pos)
     };
     // Among the apexes whose fan leaves no corner below the floor, the one that moves the
-    // vertices least; if none, the one with the largest smallest corner.
+    // vertices least; if none, the one with the largest smallest corner. Candidates are
+    // independent, so they are scored in parallel; ties go to the earlier candidate.
     let floor = smallest_corner(mesh, mesh.positions()).min(MIN_CORNER.to_radians());
-    let mut best: Option<(bool, f64, Vec<[f64; 3]>)> = None;
-    for apex in candidate_lines(&fan, &flat)
-        .into_iter()
-        .flat_map(|q| fan.apexes(q))
-    {
-        let Some(pos) = place(apex) else { continue };
-        let corner = smallest_corner(mesh, &pos);
-        let moved: f64 = interior
-            .iter()
-            .map(|&v| {
-                let d = sub(pos[v as usize], mesh.position(v));
-                dot(d, d)
-            })
-            .sum();
-        let key = (
-            corner >= floor,
-            if corner >= floor { moved } else { -corner },
-        );
-        let better = match &best {
-            None => true,
-            Some((ok, k, _)) => (key.0 && !ok) || (key.0 == *ok && key.1 < *k),
-        };
-        if better && key.1.is_finite() {
-            best = Some((key.0, key.1, pos));
-        }
-    }
-    let (_, _, pos) = best.ok_or(NoCone::NoApex)?;
+    let apexes: Vec<Apex> = candidate_lines(&fan, &flat)
+        .into_par_iter()
+        .flat_map_iter(|q| fan.apexes(q))
+        .collect();
+    let keys: Vec<Option<(bool, f64)>> = apexes
+        .par_iter()
+        .map(|&apex| {
+            let pos = place(apex)?;
+            let corner = smallest_corner(mesh, &pos);
+            let moved: f64 = interior
+                .iter()
+                .map(|&v| {
+                    let d = sub(pos[v as usize], mesh.position(v));
+                    dot(d, d)
+                })
+                .sum();
+            let ok = corner >= floor;
+            let key = if ok { moved } else { -corner };
+            key.is_finite().then_some((!ok, key))
+        })
+        .collect();
+    let best = (0..apexes.len())
+        .filter_map(|i| keys[i].map(|k| (i, k)))
+        .min_by(|a, b| a.1 .0.cmp(&b.1 .0).then(a.1 .1.total_cmp(&b.1 .1)))
+        .ok_or(NoCone::NoApex)?
+        .0;
+    let pos = place(apexes[best]).ok_or(NoCone::NoApex)?;
     mesh.with_positions(pos).map_err(|_| NoCone::NoApex)
 }
 
