@@ -310,6 +310,11 @@ fn a_noisy_saddle_converges_from_its_developable_cone() {
         m.min_angle_out.to_degrees()
     );
     assert!(r.iterations < 60, "{} iterations", r.iterations);
+    assert!(
+        r.stop_reason.starts_with("developable cone: "),
+        "{}",
+        r.stop_reason
+    );
     assert!(stages
         .0
         .lock()
