@@ -440,18 +440,6 @@ pub fn max_flattenability(mesh: &Mesh) -> f64 {
         .fold(0.0, f64::max)
 }
 
-/// Edges whose adjacent unit normals turn by more than 60°.
-fn creases(mesh: &Mesh) -> usize {
-    let n = geometry::face_normals(mesh);
-    let limit = (PI / 3.0).cos();
-    mesh.conn()
-        .edge_faces()
-        .iter()
-        .filter(|f| f[1] != crate::mesh::NONE)
-        .filter(|f| dot(n[f[0] as usize], n[f[1] as usize]) < limit)
-        .count()
-}
-
 /// Measure `output` against `input` (output keeps input vertex i as vertex i).
 pub fn measure(input: &Mesh, output: &Mesh) -> Measures {
     let (lo, hi) = input.bbox();
@@ -479,8 +467,8 @@ pub fn measure(input: &Mesh, output: &Mesh) -> Measures {
         varpi_out: max_flattenability(output),
         folds_in: geometry::fold_edges(input).len(),
         folds_out: geometry::fold_edges(output).len(),
-        creases_in: creases(input),
-        creases_out: creases(output),
+        creases_in: geometry::crease_count(input),
+        creases_out: geometry::crease_count(output),
         min_angle_in: min_angle(input),
         min_angle_out: min_angle(output),
         hausdorff_relative: hd / diag,

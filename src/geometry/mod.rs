@@ -314,6 +314,22 @@ pub fn fold_edges(mesh: &Mesh) -> Vec<u32> {
         .collect()
 }
 
+/// Adjacent face normals turning by more than this count as a crease (60°): short of a fold,
+/// but more than a smooth drape turns between neighbouring triangles.
+pub const CREASE_ANGLE: f64 = PI / 3.0;
+
+/// How many edges with two faces turn by more than [`CREASE_ANGLE`].
+pub fn crease_count(mesh: &Mesh) -> usize {
+    let fnrm = face_normals(mesh);
+    let limit = CREASE_ANGLE.cos();
+    mesh.conn()
+        .edge_faces()
+        .iter()
+        .filter(|f| f[1] != crate::mesh::NONE)
+        .filter(|f| dot(fnrm[f[0] as usize], fnrm[f[1] as usize]) < limit)
+        .count()
+}
+
 /// The smallest corner angle of every face.
 pub fn min_corner_angles(mesh: &Mesh) -> Vec<f64> {
     corner_angles(mesh)

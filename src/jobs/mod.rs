@@ -143,8 +143,8 @@ impl Kind {
                  linear_solver=ldlt|lu (ldlt), shape_guard=true|false (false), shape_penalty \
                  (1; 0: the paper's model), min_angle (2 degrees), step_radius (0.5 mean \
                  edge lengths; 0: none), cone_start=fallback|first|never (fallback: a disk \
-                 that did not converge is run again from the developable cone over its \
-                 boundary)"
+                 that did not converge, or converged by crumpling, is run again from the \
+                 developable cone over its boundary)"
             }
             Kind::Subdivide => {
                 "levels (1; or --levels), curves (or --curves), split_ratio (0.5), \
