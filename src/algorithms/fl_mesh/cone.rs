@@ -71,6 +71,11 @@ impl std::fmt::Display for NoCone {
 /// A cone start for `mesh`: the same mesh with every interior vertex moved along the mean
 /// normal onto the developable cone over its boundary (boundary vertices bit-identical).
 pub fn cone_start(mesh: &Mesh) -> Result<Mesh, NoCone> {
+    start_and_apex(mesh).map(|(start, _)| start)
+}
+
+/// [`cone_start`] and the apex it used.
+fn start_and_apex(mesh: &Mesh) -> Result<(Mesh, [f64; 3]), NoCone> {
     let conn = mesh.conn();
     let patches = conn.patches();
     let disk = patches.len() == 1
@@ -140,8 +145,10 @@ pub fn cone_start(mesh: &Mesh) -> Result<Mesh, NoCone> {
         .min_by(|a, b| a.1 .0.cmp(&b.1 .0).then(a.1 .1.total_cmp(&b.1 .1)))
         .ok_or(NoCone::NoApex)?
         .0;
-    let pos = place(apexes[best]).ok_or(NoCone::NoApex)?;
-    mesh.with_positions(pos).map_err(|_| NoCone::NoApex)
+    let apex = apexes[best];
+    let pos = place(apex).ok_or(NoCone::NoApex)?;
+    let start = mesh.with_positions(pos).map_err(|_| NoCone::NoApex)?;
+    Ok((start, frame.lift(apex.q, apex.h)))
 }
 
 /// The smallest corner angle of the mesh's triangles at positions `pos`.
@@ -410,8 +417,63 @@ mod tests {
     use super::*;
     use crate::corpus::{Family, Procedural};
 
-    /// Independent check: the apex is a 2π cone point of the boundary polygon and every
-    /// interior vertex lies on one of the fan's planar triangles.
+    /// Independent check: the apex is a 2π cone point of the boundary polygon (brute-force
+    /// sum of its angles), every interior vertex lies on one of the planar fan triangles from
+    /// it (brute-force closest point), and the boundary and every vertex's position in the
+    /// plane orthogonal to `d` are kept (but the one put on the apex).
+    fn assert_on_a_flat_cone(mesh: &Mesh, (start, apex): (Mesh, [f64; 3]), d: [f64; 3]) {
+        let b: Vec<[f64; 3]> = mesh.conn().boundary_loops()[0]
+            .iter()
+            .map(|&v| mesh.position(v))
+            .collect();
+        for &v in &mesh.conn().boundary_loops()[0] {
+            assert_eq!(start.position(v), mesh.position(v));
+        }
+        let m = b.len();
+        let angle_at = |p: [f64; 3]| -> f64 {
+            (0..m)
+                .map(|i| {
+                    let (x, y) = (sub(b[i], p), sub(b[(i + 1) % m], p));
+                    dot(cross(x, y), cross(x, y)).sqrt().atan2(dot(x, y))
+                })
+                .sum()
+        };
+        assert!(
+            (angle_at(apex) - TAU).abs() < 1e-9,
+            "cone angle {}",
+            angle_at(apex)
+        );
+        let tris: Vec<[u32; 3]> = (0..m as u32)
+            .map(|i| [m as u32, i, (i + 1) % m as u32])
+            .collect();
+        let mut pts = b.clone();
+        pts.push(apex);
+        let h = geometry::mean_edge_length(mesh);
+        let mut sideways = 0;
+        for v in mesh.conn().interior_vertices() {
+            let (p, q) = (start.position(v), mesh.position(v));
+            let d2 = crate::spatial::brute_closest_d2(p, &pts, &tris);
+            assert!(
+                d2.sqrt() < 1e-9 * h,
+                "vertex {v} is {} off the fan",
+                d2.sqrt()
+            );
+            let along = dot(sub(p, q), d);
+            let side = sub(sub(p, q), [along * d[0], along * d[1], along * d[2]]);
+            if dot(side, side).sqrt() > 1e-9 * h {
+                sideways += 1;
+            }
+        }
+        assert!(sideways <= 1, "{sideways} vertices moved sideways");
+    }
+
+    fn mean_normal(mesh: &Mesh) -> [f64; 3] {
+        let (n, a) = (geometry::face_normals(mesh), geometry::face_areas(mesh));
+        geometry::normalize(n.iter().zip(&a).fold([0.0; 3], |s, (n, a)| {
+            [s[0] + a * n[0], s[1] + a * n[1], s[2] + a * n[2]]
+        }))
+    }
+
     #[test]
     fn the_start_lies_on_a_flat_cone_over_the_boundary() {
         let mesh = Procedural {
@@ -420,44 +482,45 @@ mod tests {
             noise: 0.01,
         }
         .mesh();
-        let start = cone_start(&mesh).expect("a saddle is a height-field disk");
-        let b: Vec<[f64; 3]> = mesh.conn().boundary_loops()[0]
-            .iter()
-            .map(|&v| mesh.position(v))
-            .collect();
-        for &v in &mesh.conn().boundary_loops()[0] {
-            assert_eq!(start.position(v), mesh.position(v));
-        }
-        // Brute force: each interior vertex's distance to the nearest fan triangle, over all
-        // apexes on the cone (the apex is found as the vertex where the fan closes to 2π).
-        let apex = mesh
-            .conn()
-            .interior_vertices()
-            .map(|v| start.position(v))
-            .find(|&p| {
-                let m = b.len();
-                let a: f64 = (0..m)
-                    .map(|i| {
-                        let (x, y) = (sub(b[i], p), sub(b[(i + 1) % m], p));
-                        dot(cross(x, y), cross(x, y)).sqrt().atan2(dot(x, y))
-                    })
-                    .sum();
-                (a - TAU).abs() < 1e-6
-            })
-            .expect("one interior vertex sits on the 2π apex");
-        let tris: Vec<[u32; 3]> = (0..b.len() as u32)
-            .map(|i| [b.len() as u32, i, (i + 1) % b.len() as u32])
-            .collect();
-        let mut pts = b.clone();
-        pts.push(apex);
-        let h = geometry::mean_edge_length(&mesh);
-        for v in mesh.conn().interior_vertices() {
-            let d2 = crate::spatial::brute_closest_d2(start.position(v), &pts, &tris);
-            assert!(
-                d2.sqrt() < 1e-9 * h,
-                "vertex {v} is {} off the fan",
-                d2.sqrt()
-            );
+        let start = start_and_apex(&mesh).expect("a saddle is a height-field disk");
+        assert_on_a_flat_cone(&mesh, start, mean_normal(&mesh));
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(24))]
+        /// Saddles, domes and pleats of random size and noise, turned and scaled at random:
+        /// the start, when there is one, lies on a flat cone over the boundary; saddles and
+        /// domes with noise up to 0.1 edge lengths always have one.
+        #[test]
+        fn random_height_field_disks_land_on_a_flat_cone(
+            family in 0usize..3,
+            faces in 100usize..2500,
+            noise in 0.0f64..0.3,
+            yaw in 0.0f64..TAU,
+            pitch in -1.0f64..1.0,
+            scale in 0.01f64..100.0,
+        ) {
+            let family = [Family::Saddle, Family::Dome, Family::Pleats][family];
+            let mesh = Procedural { family, faces, noise }.mesh();
+            let (cy, sy, cp, sp) = (yaw.cos(), yaw.sin(), pitch.cos(), pitch.sin());
+            let moved: Vec<[f64; 3]> = mesh
+                .positions()
+                .iter()
+                .map(|&[x, y, z]| {
+                    let (x, y) = (cy * x - sy * y, sy * x + cy * y);
+                    let (y, z) = (cp * y - sp * z, sp * y + cp * z);
+                    [scale * x + 3.0, scale * y - 1.0, scale * z + 0.5]
+                })
+                .collect();
+            let mesh = mesh.with_positions(moved).unwrap();
+            match start_and_apex(&mesh) {
+                Ok(start) => assert_on_a_flat_cone(&mesh, start, mean_normal(&mesh)),
+                // Rough noise can tilt a face past the height-field margin.
+                Err(e) => proptest::prop_assert!(
+                    family == Family::Pleats || noise > 0.1,
+                    "{family:?} {faces} {noise}: {e}"
+                ),
+            }
         }
     }
 
