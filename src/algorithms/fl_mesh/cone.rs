@@ -19,13 +19,16 @@
 //! triangulation's layout, is kept); the vertex nearest the apex is put on it. Apexes are
 //! sought on the lines along d through the boundary's centroid and through a sample of the
 //! interior vertices (the boundary must be star-shaped from there), on both sides of the
-//! surface; the one whose fan moves the vertices least (sum of squared moves) is taken. The
-//! triangles, chords of the fan, leave a small ϖ near the apex and along the fan's sharp
-//! generators, which the Newton iterations remove (measured: saddle-7700-0.01 9–14
-//! iterations, no folds, relative Hausdorff 22 %; the domes 11 %).
+//! surface. Among the apexes whose start leaves no corner below min(10°, the input's
+//! smallest) (an apex near the boundary leaves a steep flank of slivers), the one that moves
+//! the vertices least (sum of squared moves) is taken. The triangles, chords of the fan,
+//! leave some ϖ near the apex and along the fan's sharp generators, which the Newton
+//! iterations remove (measured: the noisy saddles in 10–24 iterations at a relative
+//! Hausdorff distance of 18 %, the domes in 3–28 at 11 %, no folds; issue 12 note).
 //!
-//! Everything here is O(candidates · (n log m + m · bisection steps)) for n interior and m
-//! boundary vertices, with no factorisation.
+//! Cost: O(candidates · (F + n log m + m · bisection steps)) for F faces, n interior and m
+//! boundary vertices, no factorisation; candidates are scored in parallel. 0.07 s at 7.7k
+//! faces, 0.4 s at 45k.
 
 use crate::geometry;
 use crate::mesh::{cross, dot, sub, Mesh, VertexKind};
