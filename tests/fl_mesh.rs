@@ -173,6 +173,23 @@ fn flattenable_input_is_left_alone_by_default() {
     assert_eq!(o.positions(), m.positions());
 }
 
+/// `cone_start = first` does not replace an input that is flattenable already: a flat disk
+/// (a height-field disk, so it has a developable cone) comes back bit-identical.
+#[test]
+fn a_flattenable_disk_is_not_replaced_by_its_cone() {
+    let m = Mesh::new(flatmesh::fixtures::by_name("flat_disk").unwrap().mesh)
+        .unwrap()
+        .0;
+    assert!(fl_mesh::cone_start(&m).is_ok());
+    let params = Params {
+        cone_start: fl_mesh::ConeStart::First,
+        ..Params::default()
+    };
+    let out = fl_mesh::run(&m, &params, &Silent::default()).unwrap();
+    assert_eq!(sj(&out.summary)["iterations"], serde_json::json!(0));
+    assert_eq!(out.mesh.unwrap().positions(), m.positions());
+}
+
 /// With `until = stationary` a flattenable input moves by exactly the fairing it asks for.
 /// For a planar disk every planar position satisfies θ = 2π, so the FL mesh is the solution of
 /// the linear system w1 (v − mean of ring) + w2 (v − v⁰) = 0 at interior vertices, boundary

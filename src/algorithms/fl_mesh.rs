@@ -175,10 +175,12 @@ pub enum StepRule {
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ConeStart {
-    /// Only after the run from the input did not converge (default).
+    /// After the run from the input did not converge, or converged only by crumpling
+    /// (default).
     #[default]
     Fallback,
-    /// Before the run from the input, which is then run only if the cone's does not converge.
+    /// Before the run from the input, which then runs only if the cone's result is not
+    /// accepted (not flattenable, more folds than the input, or a corner below the floor).
     First,
     /// Never.
     Never,
@@ -454,7 +456,8 @@ pub fn run(
 /// what happened.
 ///
 /// With `cone_start = first`, a disk is first run from its developable cone; with the default
-/// `fallback`, after the run from the input did not converge (see the module doc).
+/// `fallback`, after the run from the input did not converge or converged only by crumpling
+/// (see the module doc).
 ///
 /// With the shape penalty on, a run that does not converge is followed by a run of the
 /// paper's model (no penalty) from the input, for the rest of the iteration budget, whose
@@ -490,8 +493,15 @@ pub fn solve_clear_of(
         && params.until == Until::Flattenable;
     let mut spent = 0;
     let mut tried: Option<Report> = None;
-    if cone_allowed && params.cone_start == ConeStart::First {
-        match from_cone(mesh, params, params.max_iterations, control)? {
+    // `first` leaves one iteration for the input's run, and an input that is flattenable
+    // already to that run (which returns it unchanged).
+    let cone_budget = params.max_iterations.saturating_sub(1);
+    if cone_allowed
+        && params.cone_start == ConeStart::First
+        && cone_budget > 0
+        && max_flattenability(mesh) > params.tolerance
+    {
+        match from_cone(mesh, params, cone_budget, control)? {
             ConeRun::Accepted(out, mut report) => {
                 report.stop_reason = format!("developable cone: {}", report.stop_reason);
                 return Ok((out, report));
@@ -507,7 +517,7 @@ pub fn solve_clear_of(
         }
     }
     let budget = Params {
-        max_iterations: params.max_iterations.saturating_sub(spent).max(1),
+        max_iterations: params.max_iterations - spent,
         ..params.clone()
     };
     let (out, mut first) = solve_phase(mesh, &budget, keep, control)?;
@@ -638,6 +648,14 @@ fn chain(first: Report, second: Report, reason: impl Fn(&str, &str) -> String) -
     }
 }
 
+/// ϖ_max of `mesh` over its interior vertices.
+fn max_flattenability(mesh: &Mesh) -> f64 {
+    let theta = crate::geometry::angle_sums(mesh);
+    crate::geometry::flattenability(mesh, &theta)
+        .into_iter()
+        .fold(0.0, f64::max)
+}
+
 /// What became of a run from the developable cone.
 enum ConeRun {
     /// It converged with no more folds than the input and no corner below
@@ -666,7 +684,16 @@ fn from_cone(
         max_iterations: budget,
         ..params.clone()
     };
-    let (out, report) = solve_phase(&start, &p, None, &Renamed(control, "from the cone"))?;
+    // Stopped (cancel or time limit) during this optional stage: keep what came before.
+    let (out, report) = match solve_phase(&start, &p, None, &Renamed(control, "from the cone")) {
+        Err(AlgoError::Cancelled) => {
+            return Ok(ConeRun::Rejected(
+                "stopped, cancelled or out of time".into(),
+                0,
+            ))
+        }
+        other => other?,
+    };
     let smallest = |m: &Mesh| {
         crate::geometry::min_corner_angles(m)
             .into_iter()

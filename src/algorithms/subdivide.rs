@@ -330,7 +330,13 @@ pub fn run(
         };
         let (split, split_edges) = subdivide_level(&current, &mut curves, params, &ctl)?;
         let (out, fl) = if params.flatten_levels {
-            let (m, r) = fl_mesh::solve(&split, &params.fl_mesh, &ctl)?;
+            // A level models the finer surface of its control mesh: the developable cone
+            // would replace it by another shape, so never, whatever `fl_mesh` says.
+            let fl = fl_mesh::Params {
+                cone_start: fl_mesh::ConeStart::Never,
+                ..params.fl_mesh.clone()
+            };
+            let (m, r) = fl_mesh::solve(&split, &fl, &ctl)?;
             (m, Some(r))
         } else {
             (split, None)

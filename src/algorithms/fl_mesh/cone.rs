@@ -490,15 +490,15 @@ mod tests {
     }
 
     proptest::proptest! {
-        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(24))]
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(32))]
         /// Saddles, domes and pleats of random size and noise, turned and scaled at random:
-        /// the start, when there is one, lies on a flat cone over the boundary; saddles and
-        /// domes with noise up to 0.1 edge lengths always have one.
+        /// the start, when there is one, lies on a flat cone over the boundary, and with
+        /// noise up to 0.1 edge lengths there always is one.
         #[test]
         fn random_height_field_disks_land_on_a_flat_cone(
             family in 0usize..3,
             faces in 100usize..2500,
-            noise in 0.0f64..0.3,
+            noise in 0.0f64..0.15,
             yaw in 0.0f64..TAU,
             pitch in -1.0f64..1.0,
             scale in 0.01f64..100.0,
@@ -518,9 +518,9 @@ mod tests {
             let mesh = mesh.with_positions(moved).unwrap();
             match start_and_apex(&mesh) {
                 Ok(start) => assert_on_a_flat_cone(&mesh, start, mean_normal(&mesh)),
-                // Rough noise can tilt a face past the height-field margin.
+                // Only rough noise may tilt a face past the height-field margin.
                 Err(e) => proptest::prop_assert!(
-                    family == Family::Pleats || noise > 0.1,
+                    noise > 0.1 && e == NoCone::NotAHeightField,
                     "{family:?} {faces} {noise}: {e}"
                 ),
             }

@@ -92,9 +92,6 @@ fn d_true() -> bool {
 fn d_fl_mesh() -> fl_mesh::Params {
     fl_mesh::Params {
         refine: false,
-        // A chart that does not converge is split, which keeps its shape; the cone start
-        // would move it by 10–20 % of its diagonal (not measured on charts).
-        cone_start: fl_mesh::ConeStart::Never,
         ..fl_mesh::Params::default()
     }
 }
