@@ -433,12 +433,7 @@ pub struct Measures {
 }
 
 /// ϖ_max measured by `geometry`.
-pub fn max_flattenability(mesh: &Mesh) -> f64 {
-    let theta = geometry::angle_sums(mesh);
-    geometry::flattenability(mesh, &theta)
-        .into_iter()
-        .fold(0.0, f64::max)
-}
+pub use geometry::max_flattenability;
 
 /// Measure `output` against `input` (output keeps input vertex i as vertex i).
 pub fn measure(input: &Mesh, output: &Mesh) -> Measures {

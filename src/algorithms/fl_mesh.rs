@@ -499,7 +499,7 @@ pub fn solve_clear_of(
     if cone_allowed
         && params.cone_start == ConeStart::First
         && cone_budget > 0
-        && max_flattenability(mesh) > params.tolerance
+        && crate::geometry::max_flattenability(mesh) > params.tolerance
     {
         match from_cone(mesh, params, cone_budget, control)? {
             ConeRun::Accepted(out, mut report) => {
@@ -646,14 +646,6 @@ fn chain(first: Report, second: Report, reason: impl Fn(&str, &str) -> String) -
         history,
         ..second
     }
-}
-
-/// ϖ_max of `mesh` over its interior vertices.
-fn max_flattenability(mesh: &Mesh) -> f64 {
-    let theta = crate::geometry::angle_sums(mesh);
-    crate::geometry::flattenability(mesh, &theta)
-        .into_iter()
-        .fold(0.0, f64::max)
 }
 
 /// What became of a run from the developable cone.

@@ -95,6 +95,12 @@ pub fn flattenability(mesh: &Mesh, theta: &[f64]) -> Vec<f64> {
         .collect()
 }
 
+/// ϖ_max: the largest [`flattenability`] of the mesh (0 without interior vertices).
+pub fn max_flattenability(mesh: &Mesh) -> f64 {
+    let theta = angle_sums(mesh);
+    flattenability(mesh, &theta).into_iter().fold(0.0, f64::max)
+}
+
 /// Area of the triangle a, b, c.
 pub fn triangle_area(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> f64 {
     let n = cross(sub(b, a), sub(c, a));

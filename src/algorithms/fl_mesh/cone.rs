@@ -321,7 +321,7 @@ impl<'a> Fan<'a> {
     /// The height of the fan from `apex` above plane point `p`, or None when p is outside
     /// the boundary polygon.
     fn height(&self, apex: Apex, p: [f64; 2]) -> Option<f64> {
-        let i = self.sector(apex.q, p)?;
+        let i = self.sector(apex.q, p);
         let m = self.len();
         let (a, b) = (
             sub2(self.flat[i], apex.q),
@@ -340,7 +340,7 @@ impl<'a> Fan<'a> {
 
     /// The fan triangle (apex, i, i + 1) whose angular sector around `q` holds `p`, by
     /// binary search on the polar angles (increasing, since the boundary is star-shaped).
-    fn sector(&self, q: [f64; 2], p: [f64; 2]) -> Option<usize> {
+    fn sector(&self, q: [f64; 2], p: [f64; 2]) -> usize {
         let m = self.len();
         let polar = |x: [f64; 2]| {
             let r = sub2(x, q);
@@ -359,7 +359,7 @@ impl<'a> Fan<'a> {
                 hi = mid;
             }
         }
-        Some(lo)
+        lo
     }
 }
 
