@@ -325,6 +325,37 @@ fn a_noisy_saddle_converges_from_its_developable_cone() {
         .any(|(s, _)| s.ends_with("from the cone")));
 }
 
+/// With the defaults (`auto`), a 7.7k-face noisy saddle, whose fitted curvature is clearly
+/// below −1 rad, starts from its developable cone: flattenable (measured here), no new fold,
+/// smooth, in few iterations, and the stop reason says why the cone went first.
+#[test]
+fn by_default_a_curved_saddle_starts_from_its_developable_cone() {
+    let mesh = Procedural {
+        family: Family::Saddle,
+        faces: 7_700,
+        noise: 0.01,
+    }
+    .mesh();
+    let (out, r) = fl_mesh::solve(&mesh, &Params::default(), &Silent::default()).expect("runs");
+    let m = corpus::measure(&mesh, &out);
+    assert!(m.varpi_out <= 1e-6, "ϖ_max {:e}", m.varpi_out);
+    assert!(m.folds_out <= m.folds_in);
+    let edges = mesh.conn().edges().len();
+    assert!(
+        creases(&out) <= creases(&mesh) + edges / 100,
+        "{} creases",
+        creases(&out)
+    );
+    assert!(r.iterations < 40, "{} iterations", r.iterations);
+    assert!(
+        r.stop_reason
+            .starts_with("developable cone first (fitted total curvature -")
+            && !r.stop_reason.contains("from the input"),
+        "{}",
+        r.stop_reason
+    );
+}
+
 /// Edges whose two faces' normals turn by more than 60°, counted here from scratch (cross
 /// products of the corner positions), not with the solver's own helper.
 fn creases(mesh: &Mesh) -> usize {
@@ -357,11 +388,15 @@ fn creases(mesh: &Mesh) -> usize {
         .count()
 }
 
-/// With the defaults, a noisy saddle that the run from the input makes flattenable only by
+/// With `fallback`, a noisy saddle that the run from the input makes flattenable only by
 /// crumpling it (hundreds of edges turning past 60°) is handed to the developable cone, whose
 /// result is smooth: flattenable, no new fold, and creases on under 1 % of the edges.
 #[test]
 fn a_crumpled_result_is_replaced_by_the_developable_cone() {
+    let fallback = Params {
+        cone_start: fl_mesh::ConeStart::Fallback,
+        ..Params::default()
+    };
     let mesh = Procedural {
         family: Family::Saddle,
         faces: 2_000,
@@ -379,9 +414,9 @@ fn a_crumpled_result_is_replaced_by_the_developable_cone() {
         "the run from the input no longer crumples ({} creases): pick another case",
         creases(&plain)
     );
-    let (_, w_out, converged) = check_never_worse("saddle-2000-0.1", &mesh, &Params::default());
+    let (_, w_out, converged) = check_never_worse("saddle-2000-0.1", &mesh, &fallback);
     assert!(converged && w_out <= 1e-6);
-    let (out, r) = fl_mesh::solve(&mesh, &Params::default(), &Silent::default()).expect("runs");
+    let (out, r) = fl_mesh::solve(&mesh, &fallback, &Silent::default()).expect("runs");
     assert!(r.stop_reason.contains("but crumpled"), "{}", r.stop_reason);
     let m = corpus::measure(&mesh, &out);
     assert!(m.folds_out <= m.folds_in);

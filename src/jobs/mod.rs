@@ -142,9 +142,11 @@ impl Kind {
                  refine=true|false (true), max_refinements (3), stall_iterations (40), \
                  linear_solver=ldlt|lu (ldlt), shape_guard=true|false (false), shape_penalty \
                  (1; 0: the paper's model), min_angle (2 degrees), step_radius (0.5 mean \
-                 edge lengths; 0: none), cone_start=fallback|first|never (fallback: a disk \
+                 edge lengths; 0: none), cone_start=auto|fallback|first|never (auto: a disk \
+                 whose fitted total curvature is >= 0.25 or <= -1 rad starts from the \
+                 developable cone over its boundary, others as fallback; fallback: a disk \
                  that did not converge, or converged by crumpling, is run again from the \
-                 developable cone over its boundary)"
+                 cone)"
             }
             Kind::Subdivide => {
                 "levels (1; or --levels), curves (or --curves), split_ratio (0.5), \

@@ -1,0 +1,86 @@
+//! fl-mesh on height-field disks of growing curvature, the measurements behind `cone_start =
+//! auto`'s thresholds (issue 12): one line per mesh and cone_start, every figure measured
+//! from the geometry, preceded by the mesh's fitted total curvature.
+//!
+//!     cargo run --release --example amplitude_sweep -- FAMILY AMPLITUDES SIZES MODES
+//!
+//! FAMILY is saddle (z = a(x² − y²)/2), dome (z = a(2 − x² − y²)/2), cylinder
+//! (z = √(4 − a²x²)/a, developable) or pleats (z = 0.15a sin 3πx, developable) over [−1, 1]²;
+//! AMPLITUDES, SIZES (faces) and MODES (cone_start values) are comma-separated, e.g.
+//! `saddle 0.2,0.5,1 2000,7700 never,first,auto`. Noise 0.01 and 0.1 mean edge lengths.
+
+use flatmesh::algorithms::{fl_mesh, parse_params};
+use flatmesh::corpus;
+use flatmesh::mesh::{Mesh, RawMesh};
+use std::f64::consts::PI;
+
+fn height_field(n: usize, f: &dyn Fn(f64, f64) -> f64) -> Mesh {
+    let at = |i: usize| 2.0 * i as f64 / n as f64 - 1.0;
+    let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
+    let positions = (0..=n)
+        .flat_map(|j| (0..=n).map(move |i| (i, j)))
+        .map(|(i, j)| [at(i), at(j), f(at(i), at(j))])
+        .collect();
+    let mut triangles = Vec::new();
+    for j in 0..n {
+        for i in 0..n {
+            let (a, b, c, d) = (id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1));
+            if (i + j) % 2 == 0 {
+                triangles.extend([[a, b, c], [a, c, d]]);
+            } else {
+                triangles.extend([[a, b, d], [b, c, d]]);
+            }
+        }
+    }
+    let count = triangles.len();
+    let raw = RawMesh {
+        positions,
+        triangles,
+        face_patch: vec![0; count],
+        patch_names: vec!["sheet".into()],
+        uv: None,
+    };
+    Mesh::new(raw).expect("a grid is a valid mesh").0
+}
+
+fn list<T: std::str::FromStr>(arg: Option<&String>, default: &str) -> Vec<T> {
+    arg.map_or(default, |s| s.as_str())
+        .split(',')
+        .map(|x| x.parse().ok().expect("comma-separated values"))
+        .collect()
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let family = args.first().map_or("saddle", |s| s.as_str()).to_string();
+    let amplitudes: Vec<f64> = list(args.get(1), "0.05,0.2,0.5,0.7,1");
+    let sizes: Vec<usize> = list(args.get(2), "2000,7700");
+    let modes: Vec<String> = list(args.get(3), "never,first,auto");
+    for &faces in &sizes {
+        let n = (faces as f64 / 2.0).sqrt().round() as usize;
+        for &a in &amplitudes {
+            let f: Box<dyn Fn(f64, f64) -> f64> = match family.as_str() {
+                "saddle" => Box::new(move |x, y| 0.5 * a * (x * x - y * y)),
+                "dome" => Box::new(move |x, y| 0.5 * a * (2.0 - x * x - y * y)),
+                "cylinder" => Box::new(move |x, _| (4.0 - a * a * x * x).sqrt() / a),
+                "pleats" => Box::new(move |x, _| 0.15 * a * (3.0 * PI * x).sin()),
+                other => panic!("unknown family {other}"),
+            };
+            let clean = height_field(n, &*f);
+            for noise in [0.01, 0.1] {
+                let mesh = corpus::with_normal_noise(&clean, noise, 7 + faces as u64);
+                let name = format!("{family}-{a}-{faces}-{noise}");
+                println!("# {name}: {:?}", fl_mesh::fitted_curvature(&mesh));
+                for mode in &modes {
+                    let mut m = serde_json::Map::new();
+                    m.insert("cone_start".into(), mode.clone().into());
+                    let params: fl_mesh::Params = parse_params(&m).expect("cone_start");
+                    match corpus::run_fl_mesh(&format!("{name}-{mode}"), &mesh, &params) {
+                        Ok(row) => println!("{row}"),
+                        Err(e) => println!("{name}-{mode}: {e}"),
+                    }
+                }
+            }
+        }
+    }
+}
