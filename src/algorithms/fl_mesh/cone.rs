@@ -38,8 +38,54 @@ use std::f64::consts::TAU;
 /// Most apex lines tried (the centroid's and a stride sample of interior vertices).
 const CANDIDATES: usize = 48;
 
-/// Bisection steps for the apex height (the bracket is at most a few diagonals long).
-const BISECTION: usize = 60;
+/// Most steps of the apex-height root finder (the bracket is at most a few diagonals long).
+const ROOT_STEPS: usize = 100;
+
+/// The root in (0, b) of a continuous g that is positive (`g0` = g(0)) before it and not
+/// after it: regula falsi with the Illinois modification (superlinear where bisection gains
+/// a bit per step; each step of g costs a pass over the boundary), bracketing throughout.
+/// Stops when |g| ≤ 1e-13 or the bracket is no longer than 1e-15 b.
+fn root(g: impl Fn(f64) -> f64, g0: f64, b: f64) -> f64 {
+    let (mut lo, mut glo, mut hi, mut ghi) = (0.0, g0, b, g(b));
+    let (mut best, mut gbest) = if g0.abs() < ghi.abs() {
+        (lo, g0)
+    } else {
+        (hi, ghi)
+    };
+    let mut kept = 0i8; // +1: lo was kept last step, −1: hi was.
+    for _ in 0..ROOT_STEPS {
+        if gbest.abs() <= 1e-13 || hi - lo <= 1e-15 * b {
+            break;
+        }
+        let secant = (lo * ghi - hi * glo) / (ghi - glo);
+        let x = if secant > lo && secant < hi {
+            secant
+        } else {
+            0.5 * (lo + hi)
+        };
+        let gx = g(x);
+        if gx.is_nan() {
+            break;
+        }
+        if gx.abs() < gbest.abs() {
+            (best, gbest) = (x, gx);
+        }
+        if gx > 0.0 {
+            (lo, glo) = (x, gx);
+            if kept == -1 {
+                ghi *= 0.5;
+            }
+            kept = -1;
+        } else {
+            (hi, ghi) = (x, gx);
+            if kept == 1 {
+                glo *= 0.5;
+            }
+            kept = 1;
+        }
+    }
+    best
+}
 
 /// Corners below min(this, the input's smallest), degrees, disqualify an apex when another
 /// apex avoids them.
@@ -259,8 +305,9 @@ fn start_and_apex(mesh: &Mesh) -> Result<(Mesh, [f64; 3]), NoCone> {
     let fan = Fan::new(&boundary, &frame);
     let place = |apex: Apex| -> Option<Vec<[f64; 3]>> {
         let mut pos = mesh.positions().to_vec();
+        let polar = fan.polar_angles(apex.q);
         for (&v, &q) in interior.iter().zip(&flat) {
-            pos[v as usize] = frame.lift(q, fan.height(apex, q)?);
+            pos[v as usize] = frame.lift(q, fan.height(apex, &polar, q)?);
         }
         snap_nearest_to_apex(mesh, &frame, &mut pos, &interior, &flat, apex);
         Some(pos)
@@ -301,19 +348,30 @@ fn start_and_apex(mesh: &Mesh) -> Result<(Mesh, [f64; 3]), NoCone> {
     Ok((start, frame.lift(apex.q, apex.h)))
 }
 
-/// The smallest corner angle of the mesh's triangles at positions `pos`.
+/// The smallest corner angle of the mesh's triangles at positions `pos`: the largest cosine,
+/// one arccosine at the end (no arctangent per corner: this scores every candidate apex). A
+/// corner with a zero-length side counts as 0.
 fn smallest_corner(mesh: &Mesh, pos: &[[f64; 3]]) -> f64 {
-    mesh.triangles()
+    let cosine = |o: [f64; 3], a: [f64; 3], b: [f64; 3]| {
+        let (u, v) = (sub(a, o), sub(b, o));
+        let c = dot(u, v) / (dot(u, u) * dot(v, v)).sqrt();
+        if c.is_nan() {
+            1.0
+        } else {
+            c
+        }
+    };
+    let largest = mesh
+        .triangles()
         .iter()
-        .flat_map(|t| {
+        .map(|t| {
             let p = t.map(|v| pos[v as usize]);
-            [
-                geometry::corner_angle(p[0], p[1], p[2]),
-                geometry::corner_angle(p[1], p[2], p[0]),
-                geometry::corner_angle(p[2], p[0], p[1]),
-            ]
+            cosine(p[0], p[1], p[2])
+                .max(cosine(p[1], p[2], p[0]))
+                .max(cosine(p[2], p[0], p[1]))
         })
-        .fold(std::f64::consts::PI, f64::min)
+        .fold(-1.0, f64::max);
+    largest.clamp(-1.0, 1.0).acos()
 }
 
 /// Orthonormal (e1, e2, d) with e1 × e2 = d: plane coordinates and heights along d.
@@ -448,16 +506,8 @@ impl<'a> Fan<'a> {
             while at(peak + dir * far) > TAU && far < 1e6 * span {
                 far *= 2.0;
             }
-            let (mut inside, mut outside) = (0.0, far);
-            for _ in 0..BISECTION {
-                let mid = 0.5 * (inside + outside);
-                if at(peak + dir * mid) > TAU {
-                    inside = mid;
-                } else {
-                    outside = mid;
-                }
-            }
-            let h = peak + dir * 0.5 * (inside + outside);
+            let x = root(|x| at(peak + dir * x) - TAU, best - TAU, far);
+            let h = peak + dir * x;
             if h.is_finite() {
                 out.push(Apex { q, h });
             }
@@ -465,10 +515,27 @@ impl<'a> Fan<'a> {
         out
     }
 
+    /// The polar angles around `q` of the boundary points, measured from b₀'s and
+    /// increasing (the boundary is star-shaped from q): computed once per apex, so that
+    /// [`Fan::height`] costs one arctangent and a binary search.
+    fn polar_angles(&self, q: [f64; 2]) -> Polar {
+        let polar = |x: [f64; 2]| {
+            let r = sub2(x, q);
+            r[1].atan2(r[0])
+        };
+        let base = polar(self.flat[0]);
+        let angles = self
+            .flat
+            .iter()
+            .map(|&b| (polar(b) - base).rem_euclid(TAU))
+            .collect();
+        Polar { base, angles }
+    }
+
     /// The height of the fan from `apex` above plane point `p`, or None when p is outside
-    /// the boundary polygon.
-    fn height(&self, apex: Apex, p: [f64; 2]) -> Option<f64> {
-        let i = self.sector(apex.q, p);
+    /// the boundary polygon; `polar` from [`Fan::polar_angles`] at the apex.
+    fn height(&self, apex: Apex, polar: &Polar, p: [f64; 2]) -> Option<f64> {
+        let i = polar.sector(apex.q, p);
         let m = self.len();
         let (a, b) = (
             sub2(self.flat[i], apex.q),
@@ -484,29 +551,21 @@ impl<'a> Fan<'a> {
         let h = apex.h + s * (self.heights[i] - apex.h) + t * (self.heights[(i + 1) % m] - apex.h);
         h.is_finite().then_some(h)
     }
+}
 
-    /// The fan triangle (apex, i, i + 1) whose angular sector around `q` holds `p`, by
-    /// binary search on the polar angles (increasing, since the boundary is star-shaped).
+/// Polar angles of the boundary points around an apex: b₀'s, and each one's from it.
+struct Polar {
+    base: f64,
+    angles: Vec<f64>,
+}
+
+impl Polar {
+    /// The fan triangle (apex, i, i + 1) whose angular sector around `q` holds `p`: the
+    /// last i whose angle is ≤ p's, by binary search (angles[0] = 0).
     fn sector(&self, q: [f64; 2], p: [f64; 2]) -> usize {
-        let m = self.len();
-        let polar = |x: [f64; 2]| {
-            let r = sub2(x, q);
-            r[1].atan2(r[0])
-        };
-        let base = polar(self.flat[0]);
-        let unwrap = |a: f64| (a - base).rem_euclid(TAU);
-        let target = unwrap(polar(p));
-        // angles[i] = unwrap(polar(b_i)), increasing from angles[0] = 0.
-        let (mut lo, mut hi) = (0usize, m);
-        while hi - lo > 1 {
-            let mid = (lo + hi) / 2;
-            if unwrap(polar(self.flat[mid])) <= target {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-        lo
+        let r = sub2(p, q);
+        let target = (r[1].atan2(r[0]) - self.base).rem_euclid(TAU);
+        self.angles.partition_point(|&a| a <= target).max(1) - 1
     }
 }
 
