@@ -131,9 +131,11 @@
 //!   saddle-2000-*, saddle-7700-0.1: 44–989 new creases) come back smooth (≤ 10 creases)
 //!   at 16–18 % instead of 2–5 % of the diagonal. No real mesh of ../shared qualifies (none
 //!   is a height-field disk), so their results are unchanged. Criterion medians, noisy
-//!   saddles (0.01): 7.7k faces 0.39 s and 45k faces 6.2 s with `first`; 5.0 s and one
-//!   49 s run with the default, which reaches the cone only after the input's run stalls.
-//!   The domes converge from the input too, but farther (14–16 %) than the cone (11 %).
+//!   saddles (0.01), defaults (`auto`, the cone first): 7.7k faces 0.44 s (14 iterations),
+//!   45k faces 5.2 s (20); with `fallback`, which reaches the cone only after the input's
+//!   run stalls, 5.1 s (181) at 7.7k. The noisy domes of 7.7k and 45k faces, which `auto`
+//!   also starts from the cone: 0.3–0.4 s and 6.6–6.8 s (were 5.8 s and 52–53 s with
+//!   `fallback`), at the same 11 % of the diagonal.
 //!   Tried and dropped: disks that are no height field laid out by Tutte's embedding in
 //!   the cone's development (bff_face: the start lands on the cone, but the run from it
 //!   stalls at 1.4e-3 with every stuck vertex within 3 edge lengths of the apex).
