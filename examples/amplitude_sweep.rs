@@ -5,9 +5,12 @@
 //!     cargo run --release --example amplitude_sweep -- FAMILY AMPLITUDES SIZES MODES
 //!
 //! FAMILY is saddle (z = a(x² − y²)/2), dome (z = a(2 − x² − y²)/2), cylinder
-//! (z = √(4 − a²x²)/a, developable) or pleats (z = 0.15a sin 3πx, developable) over [−1, 1]²;
+//! (z = √(4 − a²x²)/a, developable), pleats (z = 0.15a sin 3πx, developable) or bumps (six
+//! Gaussian bumps of height 3a and radius 4 mean edge lengths on a flat sheet) over [−1, 1]²;
 //! AMPLITUDES, SIZES (faces) and MODES (cone_start values) are comma-separated, e.g.
-//! `saddle 0.2,0.5,1 2000,7700 never,first,auto`. Noise 0.01 and 0.1 mean edge lengths.
+//! `saddle 0.2,0.5,1 2000,7700 never,first,auto`. Noise 0.01 and 0.1 mean edge lengths. A
+//! fifth argument KEY=VALUE,… sets other fl-mesh parameters for every run. With
+//! SWEEP_HISTORY set, each run's iteration history is printed first.
 
 use flatmesh::algorithms::{fl_mesh, parse_params};
 use flatmesh::corpus;
@@ -64,9 +67,14 @@ fn main() {
                 "dome" => Box::new(move |x, y| 0.5 * a * (2.0 - x * x - y * y)),
                 "cylinder" => Box::new(move |x, _| (4.0 - a * a * x * x).sqrt() / a),
                 "pleats" => Box::new(move |x, _| 0.15 * a * (3.0 * PI * x).sin()),
+                "bumps" => Box::new(|_, _| 0.0),
                 other => panic!("unknown family {other}"),
             };
-            let clean = height_field(n, &*f);
+            let mut clean = height_field(n, &*f);
+            if family == "bumps" {
+                // Six Gaussian bumps of height 3a and radius 4 mean edge lengths on a flat sheet.
+                clean = corpus::with_bumps(&clean, 6, 3.0 * a, 4.0, 11);
+            }
             for noise in [0.01, 0.1] {
                 let mesh = corpus::with_normal_noise(&clean, noise, 7 + faces as u64);
                 let name = format!("{family}-{a}-{faces}-{noise}");
@@ -74,7 +82,21 @@ fn main() {
                 for mode in &modes {
                     let mut m = serde_json::Map::new();
                     m.insert("cone_start".into(), mode.clone().into());
+                    for kv in args.get(4).iter().flat_map(|s| s.split(',')) {
+                        let (k, v) = kv.split_once('=').expect("KEY=VALUE");
+                        let v = serde_json::from_str(v).unwrap_or_else(|_| v.into());
+                        m.insert(k.into(), v);
+                    }
                     let params: fl_mesh::Params = parse_params(&m).expect("cone_start");
+                    if std::env::var("SWEEP_HISTORY").is_ok() {
+                        // Per iteration: ϖ_max, full step / h̄, step length, μ.
+                        let silent = flatmesh::algorithms::Silent::default();
+                        let (_, r) = fl_mesh::solve(&mesh, &params, &silent).expect("runs");
+                        for h in &r.history {
+                            let (w, n, a) = (h.max_flattenability, h.step_norm, h.step_length);
+                            println!("  {} {w:.3e} {n:.3} {a:.3} {:.1e}", h.iteration, h.damping);
+                        }
+                    }
                     match corpus::run_fl_mesh(&format!("{name}-{mode}"), &mesh, &params) {
                         Ok(row) => println!("{row}"),
                         Err(e) => println!("{name}-{mode}: {e}"),
