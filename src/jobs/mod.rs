@@ -143,8 +143,9 @@ impl Kind {
                  linear_solver=ldlt|lu (ldlt), shape_guard=true|false (false), shape_penalty \
                  (1; 0: the paper's model), min_angle (2 degrees), step_radius (0.5 mean \
                  edge lengths; 0: none), cone_start=auto|fallback|first|never (auto: a disk \
-                 whose fitted total curvature is >= 0.25 or <= -1 rad starts from the \
-                 developable cone over its boundary, others as fallback; fallback: a disk \
+                 whose fitted total curvature is >= 0.25 or <= -1 rad (3 standard errors \
+                 clear of 0) starts from the developable cone over its boundary, others as \
+                 fallback; fallback: a disk \
                  that did not converge, or converged by crumpling, is run again from the \
                  cone)"
             }
