@@ -10,23 +10,43 @@
 //! AMPLITUDES, SIZES (faces) and MODES (cone_start values) are comma-separated, e.g.
 //! `saddle 0.2,0.5,1 2000,7700 never,first,auto`. Noise 0.01 and 0.1 mean edge lengths. A
 //! fifth argument KEY=VALUE,… sets other fl-mesh parameters for every run. With
-//! SWEEP_HISTORY set, each run's iteration history is printed first.
+//! SWEEP_HISTORY set, each run's iteration history is printed first; SWEEP_ROUND keeps the
+//! cells inside the unit circle (a ragged round disk), SWEEP_JITTER=J moves interior grid
+//! points in the plane by up to J cell widths (irregular triangles).
 
 use flatmesh::algorithms::{fl_mesh, parse_params};
 use flatmesh::corpus;
 use flatmesh::mesh::{Mesh, RawMesh};
 use std::f64::consts::PI;
 
-fn height_field(n: usize, f: &dyn Fn(f64, f64) -> f64) -> Mesh {
+/// The height field over an n × n grid of [−1, 1]²; with `round`, only the cells inside the
+/// unit circle (a ragged round disk); with `jitter`, interior grid points moved in the plane
+/// by up to that many cell widths (deterministic), so that the triangles are irregular.
+fn height_field(n: usize, f: &dyn Fn(f64, f64) -> f64, round: bool, jitter: f64) -> Mesh {
     let at = |i: usize| 2.0 * i as f64 / n as f64 - 1.0;
     let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
-    let positions = (0..=n)
+    let cell = 2.0 / n as f64;
+    let wobble = |i: usize, j: usize, k: u64| {
+        let mut x = (i as u64 * 0x9E37_79B9 + j as u64 * 0x85EB_CA6B + k).wrapping_mul(0xC2B2_AE35);
+        x ^= x >> 29;
+        (x % 10_000) as f64 / 10_000.0 - 0.5
+    };
+    let positions: Vec<[f64; 3]> = (0..=n)
         .flat_map(|j| (0..=n).map(move |i| (i, j)))
-        .map(|(i, j)| [at(i), at(j), f(at(i), at(j))])
+        .map(|(i, j)| {
+            let inner = i > 0 && j > 0 && i < n && j < n;
+            let s = if inner { jitter * cell } else { 0.0 };
+            let (x, y) = (at(i) + s * wobble(i, j, 1), at(j) + s * wobble(i, j, 2));
+            [x, y, f(x, y)]
+        })
         .collect();
+    let inside = |i: usize, j: usize| {
+        let (x, y) = (at(i) + 0.5 * cell, at(j) + 0.5 * cell);
+        !round || x * x + y * y <= 1.0
+    };
     let mut triangles = Vec::new();
     for j in 0..n {
-        for i in 0..n {
+        for i in (0..n).filter(|&i| inside(i, j)) {
             let (a, b, c, d) = (id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1));
             if (i + j) % 2 == 0 {
                 triangles.extend([[a, b, c], [a, c, d]]);
@@ -35,6 +55,19 @@ fn height_field(n: usize, f: &dyn Fn(f64, f64) -> f64) -> Mesh {
             }
         }
     }
+    // Keep the used vertices only.
+    let mut map = vec![u32::MAX; (n + 1) * (n + 1)];
+    let mut kept = Vec::new();
+    for t in &mut triangles {
+        for v in t.iter_mut() {
+            if map[*v as usize] == u32::MAX {
+                map[*v as usize] = kept.len() as u32;
+                kept.push(*v);
+            }
+            *v = map[*v as usize];
+        }
+    }
+    let positions: Vec<[f64; 3]> = kept.iter().map(|&v| positions[v as usize]).collect();
     let count = triangles.len();
     let raw = RawMesh {
         positions,
@@ -70,7 +103,9 @@ fn main() {
                 "bumps" => Box::new(|_, _| 0.0),
                 other => panic!("unknown family {other}"),
             };
-            let mut clean = height_field(n, &*f);
+            let round = std::env::var("SWEEP_ROUND").is_ok();
+            let jitter = std::env::var("SWEEP_JITTER").map_or(0.0, |j| j.parse().unwrap_or(0.0));
+            let mut clean = height_field(n, &*f, round, jitter);
             if family == "bumps" {
                 // Six Gaussian bumps of height 3a and radius 4 mean edge lengths on a flat sheet.
                 clean = corpus::with_bumps(&clean, 6, 3.0 * a, 4.0, 11);
