@@ -115,7 +115,8 @@
 //!   rad and 3 standard errors clear of zero — where the input's run was measured never to
 //!   end better (saddles a(x² − y²)/2 from a = 0.7 and domes from a = 0.5, 2k–20k faces,
 //!   noise 0.01–0.1: it stalled or crumpled, or converged farther than the cone), and is
-//!   `fallback` otherwise. Developable sheets (cylinder, cone, pleats; 7.7k–20k faces, noise
+//!   `fallback` otherwise; the cone's run then gets at most a third of the budget (where
+//!   `auto` fired it converged in 12–26 iterations). Developable sheets (cylinder, cone, pleats; 7.7k–20k faces, noise
 //!   up to 0.1) read at most 0.4 rad, and then within 1.2 standard errors of zero, so never
 //!   pass; meshes too coarse to fit (≈ 60 vertices per neighbourhood of a quarter of the RMS
 //!   radius, a few thousand faces) get no verdict.
@@ -189,8 +190,8 @@ pub enum StepRule {
 pub enum ConeStart {
     /// First when the patch's smooth curvature is large enough that the input's run was
     /// measured never to end better (fitted total curvature ≥ [`CONE_FIRST_DOME`] or ≤
-    /// −[`CONE_FIRST_SADDLE`] rad, and 3 standard errors clear of zero), else as `fallback`
-    /// (default).
+    /// −[`CONE_FIRST_SADDLE`] rad, and 3 standard errors clear of zero; that run gets at most
+    /// a third of `max_iterations`), else as `fallback` (default).
     #[default]
     Auto,
     /// After the run from the input did not converge, or converged only by crumpling.
