@@ -116,10 +116,11 @@
 //!   end better (saddles a(x² − y²)/2 from a = 0.7 and domes from a = 0.5, 2k–20k faces,
 //!   noise 0.01–0.1: it stalled or crumpled, or converged farther than the cone), and is
 //!   `fallback` otherwise; the cone's run then gets at most a third of the budget (where
-//!   `auto` fired it converged in 12–26 iterations). Developable sheets (cylinder, cone, pleats; 7.7k–20k faces, noise
-//!   up to 0.1) read at most 0.4 rad, and then within 1.2 standard errors of zero, so never
-//!   pass; meshes too coarse to fit (≈ 60 vertices per neighbourhood of a quarter of the RMS
-//!   radius, a few thousand faces) get no verdict.
+//!   `auto` fired it converged in 12–26 iterations on the corpus, in up to 93 on the
+//!   amplitude sweeps). Developable sheets (cylinder, cone, pleats; 7.7k–20k faces, noise up
+//!   to 0.1) read at most 0.4 rad, and then within 1.2 standard errors of zero, so never
+//!   pass; meshes too coarse to fit (≈ 60 vertices per neighbourhood of a quarter of the
+//!   RMS radius, a few thousand faces) get no verdict.
 //!   `fallback` runs it after the run from the input failed, and also after one
 //!   that converged by crumpling (new creases past 60° on more than 1 % of the edges), whose
 //!   result it then replaces if it creases less: the issue puts "never crumple it" before
@@ -513,7 +514,7 @@ pub fn solve_clear_of(
     let mut tried: Option<Report> = None;
     // `first` leaves one iteration for the input's run, and an input that is flattenable
     // already to that run (which returns it unchanged). `auto` gives the cone a third of the
-    // budget: where it fired on the corpus the cone's run converged in 12–26 iterations, and
+    // budget: where it fired the cone's run converged in 12–26 iterations (corpus), and
     // where it stalls (a ragged boundary's d-cone is pleated along the generators to every
     // corner: a round staircase saddle, 1.6e-4) the input's run keeps two thirds.
     let cone_budget = match params.cone_start {
@@ -662,17 +663,17 @@ fn uncrumple(
 }
 
 /// Fitted total curvature (rad, [`fitted_curvature`]) from which `auto` starts a dome-like
-/// disk from its cone: from a reading of about 0.15 (domes z = a(2 − x² − y²)/2, a ≥ 0.2, 2k–20k
-/// faces, noise 0.01 and 0.1) the cone's result was as close to the input as the input's
-/// own run or closer (hd 2.4–8.2 % against 3.4–11.8 %), in fewer iterations, with larger
-/// corners. Developable sheets read up to 0.4 rad but never 3 standard errors clear of zero
+/// disk from its cone: from a reading of about 0.15 (domes z = a(2 − x² − y²)/2, a ≥ 0.2,
+/// 2k–20k faces, noise 0.01 and 0.1) the cone's result was as close to the input as the
+/// input's own run or closer (hd 2.4–8.2 % against 3.4–11.8 %), in fewer iterations, with
+/// larger corners. Developable sheets read up to 0.4 rad but never 3 standard errors clear of zero
 /// (pleats-7700-0.1: −0.39 ± 0.36), which the gate also asks.
 pub const CONE_FIRST_DOME: f64 = 0.25;
 
-/// Fitted total curvature (rad) from which `auto` starts a saddle-like disk (∫K ≤ −this)
-/// from its cone. Saddles z = a(x² − y²)/2 keep nearby crumpled flattenable surfaces: from
-/// the input, a ≤ 0.5 (∫K ≥ −0.6) can converge at 1–2 % with few creases, but from a = 0.7
-/// (∫K ≈ −1.1) every run from the input stalled or crumpled (102–395 new creases), so the
+/// Fitted total curvature (rad) from which `auto` starts a saddle-like disk (a reading ≤
+/// −this) from its cone. Saddles z = a(x² − y²)/2 keep nearby crumpled flattenable surfaces:
+/// from the input, a ≤ 0.5 (reading ≈ −0.6) can converge at 1–2 % with few creases, but from
+/// a = 0.7 (≈ −1.1) every run from the input stalled or crumpled (102–395 new creases), so the
 /// default ended at the cone anyway after 50–340 wasted iterations (issue 12 note).
 pub const CONE_FIRST_SADDLE: f64 = 1.0;
 
