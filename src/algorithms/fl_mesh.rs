@@ -159,6 +159,7 @@
 
 mod cone;
 mod contact;
+mod parts;
 
 pub use cone::{cone_start, fitted_curvature, Curvature, NoCone};
 pub use contact::{Keep, Obstacle};
@@ -288,6 +289,10 @@ pub struct Params {
     /// `fallback` (default), `first` or `never`: when a disk that is a height field is
     /// started from the developable cone over its boundary (see the module doc).
     pub cone_start: ConeStart,
+    /// A run that stalled (ended unconverged before `max_iterations`) is retried: its parts
+    /// alone, then from the best result, each run with its own `max_iterations` (see
+    /// [`solve`]).
+    pub retry: bool,
 }
 
 impl Default for Params {
@@ -311,6 +316,7 @@ impl Default for Params {
             min_angle: 2.0,
             step_radius: 0.5,
             cone_start: ConeStart::Auto,
+            retry: true,
         }
     }
 }
@@ -438,6 +444,33 @@ pub struct Report {
     pub stationarity: f64,
     /// Number of unknown (interior, free) vertices at the end.
     pub free_vertices: usize,
+    /// When the whole run did not converge and the mesh has several independent parts (its
+    /// patch components; see [`solve`]): each part's outcome, in the order of their first
+    /// faces. Empty otherwise.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub parts: Vec<PartReport>,
+}
+
+/// The outcome of one independent part of a mesh (a connected part of one patch).
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct PartReport {
+    /// The part's patch.
+    pub patch: String,
+    /// Its faces in the input.
+    pub faces: usize,
+    /// Its interior (free) vertices in the input.
+    pub interior_vertices: usize,
+    /// Which result it kept: "whole" (the whole mesh's run) or "alone" (its own run).
+    pub kept: String,
+    /// ϖ_max ≤ tolerance on the kept result.
+    pub converged: bool,
+    /// ϖ_max of the kept result.
+    pub max_flattenability: f64,
+    /// Iterations of its own run (0 when it was flattenable in the whole run's result, or a
+    /// closed component that cannot be).
+    pub iterations: usize,
+    /// Why its own run ended ("" when there was none).
+    pub stop_reason: String,
 }
 
 /// What `fl-mesh` reports: the solver's [`Report`] and the distance moved.
@@ -487,12 +520,351 @@ pub fn run(
 /// new folds against 0.47 rad with none, and neither is usable). Continuing from the penalised
 /// result instead of the input was measured worse (worksuit 0.18 rad). With `shape_guard`,
 /// neither run folds.
+///
+/// Retries (`retry`, default on). A run that stalled — ended unconverged before
+/// `max_iterations` — is tried again, each new run with its own `max_iterations`, so a stalled
+/// mesh may take up to three times the budget. A mesh of several independent parts (the
+/// connected parts of its patches; the `parts` module) runs every part still above the
+/// tolerance alone from the input, in parallel, and, where that does not converge, once more
+/// from the better of the part's two results (a restart: anchors, damping, fairing weight and
+/// stall window afresh); each part keeps the best of its results (flattenable first, then the
+/// lower ϖ_max: the issue's merit; the penalised-first choice above is made inside each
+/// run). Parts share no equation, so the combination is as valid as any one run and never
+/// worse part by part. A mesh of one part gets the restart from the whole run's result.
+/// The report then chains every run's iterations and history, lists each part in `parts`, and
+/// measures ϖ_max and the stuck vertices on the combined output. Measured on the real meshes
+/// (issue 12 note): mh_female_sportsuit01 converges (stalled at 2.0e-3 before); ϖ_max falls on
+/// five more (diffavatar_shirt_artist 1.4e-3 → 4.2e-4, mh_shoes01 1.3e-2 → 8.3e-3), and
+/// every mesh that converged whole is untouched.
 pub fn solve(
     mesh: &Mesh,
     params: &Params,
     control: &dyn Control,
 ) -> Result<(Mesh, Report), AlgoError> {
+    let (whole_out, mut whole) = solve_clear_of(mesh, params, None, control)?;
+    if whole.converged {
+        return Ok((whole_out, whole));
+    }
+    // Only a stall is retried: a run cut short by `max_iterations` was given its budget.
+    if !params.retry || whole.iterations >= params.max_iterations {
+        return Ok((whole_out, whole));
+    }
+    let Some(split) = parts::split(mesh) else {
+        return restart(mesh, whole_out, whole, params, control);
+    };
+    // Each part of the whole run's result, with its vertices' ids in that result.
+    let Some(from_whole) = parts::restrict(&whole_out, mesh, &split) else {
+        return Ok((whole_out, whole));
+    };
+    let wmax = |m: &Mesh| crate::geometry::max_flattenability(m);
+    let retry: Vec<bool> = from_whole
+        .iter()
+        .zip(&split)
+        .map(|((m, _), part)| {
+            wmax(m) > params.tolerance && !impossible_vertices(&part.mesh).contains(&true)
+        })
+        .collect();
+    let total = split.len();
+    let alone: Vec<Option<Result<PartRun, AlgoError>>> = {
+        use rayon::prelude::*;
+        split
+            .par_iter()
+            .zip(&retry)
+            .zip(&from_whole)
+            .enumerate()
+            .map(|(k, ((part, &retry), (w, _)))| {
+                retry.then(|| {
+                    let label = InPart {
+                        control,
+                        label: format!("part {} of {total} alone", k + 1),
+                    };
+                    retry_part(&part.mesh, w, params, &label)
+                })
+            })
+            .collect()
+    };
+    let mut runs = Vec::with_capacity(total);
+    for run in alone {
+        match run {
+            Some(Err(AlgoError::Cancelled)) => {
+                // An optional stage stopped (cancel or time limit): keep the whole run.
+                whole.stop_reason = format!(
+                    "{}; the parts alone: stopped, cancelled or out of time",
+                    whole.stop_reason
+                );
+                return Ok((whole_out, whole));
+            }
+            Some(run) => runs.push(Some(run?)),
+            None => runs.push(None),
+        }
+    }
+    let whole_refined = std::mem::take(&mut whole.refined);
+    let mut report = whole;
+    let mut chosen: Vec<&Mesh> = Vec::with_capacity(total);
+    // New (refinement) vertices of the kept results are appended part by part.
+    let mut first_new = mesh.num_vertices() as u32;
+    for ((part, (w, w_vertices)), run) in split.iter().zip(&from_whole).zip(&runs) {
+        let w_whole = wmax(w);
+        let mut row = PartReport {
+            patch: part.mesh.patch_names()[0].clone(),
+            faces: part.faces.len(),
+            interior_vertices: part.mesh.conn().interior_vertices().count(),
+            kept: "whole".into(),
+            converged: w_whole <= params.tolerance,
+            max_flattenability: w_whole,
+            ..PartReport::default()
+        };
+        let mut kept = w;
+        // The whole run's refined vertices that are this part's, in its local numbering.
+        let local_whole: Vec<u32> = whole_refined
+            .iter()
+            .filter_map(|&v| w_vertices.iter().position(|&u| u == v).map(|l| l as u32))
+            .collect();
+        let mut refined = local_whole.clone();
+        if let Some(run) = run {
+            let r = &run.report;
+            let offset = report.iterations;
+            report
+                .history
+                .extend(r.history.iter().map(|h| HistoryEntry {
+                    iteration: h.iteration + offset,
+                    ..*h
+                }));
+            report.iterations += r.iterations;
+            row.iterations = r.iterations;
+            row.stop_reason = r.stop_reason.clone();
+            if run.kept != "whole" {
+                kept = &run.mesh;
+                refined = if run.from_whole {
+                    [local_whole, r.refined.clone()].concat()
+                } else {
+                    r.refined.clone()
+                };
+                row.kept = run.kept.into();
+                row.converged = r.converged;
+                row.max_flattenability = r.max_flattenability;
+                if r.best_iteration > 0 {
+                    report.best_iteration = offset + r.best_iteration;
+                }
+            }
+        }
+        report.refined.extend(
+            refined
+                .into_iter()
+                .map(|l| parts::global_vertex(part, first_new, l)),
+        );
+        first_new += (kept.num_vertices() - part.vertices.len()) as u32;
+        chosen.push(kept);
+        report.parts.push(row);
+    }
+    // Each part validated, and merging changes no face that a part did not.
+    let out = Mesh::new(parts::merge(mesh, &split, &chosen))
+        .map_err(|e| AlgoError::Input(format!("merging the parts: {e}")))?
+        .0;
+    // The verdict from the combined mesh's own angles, as for a whole run.
+    let theta = crate::geometry::angle_sums(&out);
+    let varpi = crate::geometry::flattenability(&out, &theta);
+    report.max_flattenability = varpi.iter().copied().fold(0.0, f64::max);
+    report.stuck_vertices = (0..varpi.len() as u32)
+        .filter(|&v| varpi[v as usize] > params.tolerance)
+        .collect();
+    report
+        .stuck_vertices
+        .sort_by(|a, b| varpi[*b as usize].total_cmp(&varpi[*a as usize]));
+    report.converged =
+        report.parts.iter().all(|p| p.converged) && report.max_flattenability <= params.tolerance;
+    report.stop_reason = format!(
+        "whole: {}; {}",
+        report.stop_reason,
+        parts_reason(&report.parts)
+    );
+    Ok((out, report))
+}
+
+/// [`solve`] without its retries: one run of the whole mesh (for callers that handle a
+/// failure themselves, as `segment` splits the chart).
+pub fn solve_once(
+    mesh: &Mesh,
+    params: &Params,
+    control: &dyn Control,
+) -> Result<(Mesh, Report), AlgoError> {
     solve_clear_of(mesh, params, None, control)
+}
+
+/// A mesh of one part that the whole run left unconverged: one more run from its result (the
+/// best iterate; anchors, damping, fairing weight and stall window start afresh), kept when it
+/// converged or lowered ϖ_max. Not for closed components, whose obstruction is proven.
+fn restart(
+    mesh: &Mesh,
+    out: Mesh,
+    mut first: Report,
+    params: &Params,
+    control: &dyn Control,
+) -> Result<(Mesh, Report), AlgoError> {
+    if first.free_vertices == 0 || impossible_vertices(mesh).contains(&true) {
+        return Ok((out, first));
+    }
+    let (again, second) = match solve_clear_of(&out, params, None, &Renamed(control, "restart")) {
+        // An optional stage stopped (cancel or time limit): keep the first run.
+        Err(AlgoError::Cancelled) => {
+            first.stop_reason = format!(
+                "{}; restart: stopped, cancelled or out of time",
+                first.stop_reason
+            );
+            return Ok((out, first));
+        }
+        other => other?,
+    };
+    if second.converged || second.max_flattenability < first.max_flattenability {
+        // The restart's numbering extends the first run's (refinement appends).
+        let refined = first.refined.clone();
+        let mut report = chain(first, second, |f, s| {
+            format!("{f}; restarted from the best iterate: {s}")
+        });
+        report.refined = [refined, report.refined].concat();
+        return Ok((again, report));
+    }
+    let offset = first.iterations;
+    first
+        .history
+        .extend(second.history.iter().map(|h| HistoryEntry {
+            iteration: h.iteration + offset,
+            ..*h
+        }));
+    first.iterations += second.iterations;
+    first.stop_reason = format!(
+        "{}; restarted from the best iterate, which did not lower ϖ_max ({:.2e}: {})",
+        first.stop_reason, second.max_flattenability, second.stop_reason
+    );
+    Ok((out, first))
+}
+
+/// A part's own runs and the result it keeps.
+struct PartRun {
+    mesh: Mesh,
+    /// The runs chained (iterations, history; `refined` in `mesh`'s numbering, beyond the
+    /// start's own refinement when `from_whole`).
+    report: Report,
+    /// "alone" (its run from the input), "restart" (the run from its best result so far), or
+    /// "whole" (neither beat the whole run's result).
+    kept: &'static str,
+    /// The kept result continued the whole run's result (whose refinement it carries).
+    from_whole: bool,
+}
+
+/// A part that the whole run left unconverged: solved alone from the input, and if that does
+/// not converge either, once more from the better of the two results (a restart: anchors,
+/// damping, fairing weight and stall window start afresh there). Measured on the real garments
+/// (issue 12 note) the second run is what converged mh_female_sportsuit01; the first, the
+/// buttons of mh_male_worksuit01.
+fn retry_part(
+    part: &Mesh,
+    whole: &Mesh,
+    params: &Params,
+    control: &dyn Control,
+) -> Result<PartRun, AlgoError> {
+    let w_whole = crate::geometry::max_flattenability(whole);
+    let (a, ra) = solve_clear_of(part, params, None, control)?;
+    let a_better = ra.converged || ra.max_flattenability < w_whole;
+    if ra.converged {
+        return Ok(PartRun {
+            mesh: a,
+            report: ra,
+            kept: "alone",
+            from_whole: false,
+        });
+    }
+    let start = if a_better { &a } else { whole };
+    let (b, rb) = solve_clear_of(start, params, None, &Renamed(control, "restart"))?;
+    let b_better = rb.converged || rb.max_flattenability < ra.max_flattenability.min(w_whole);
+    let (refined_a, best_a) = (ra.refined.clone(), ra.best_iteration);
+    let mut report = chain(ra, rb, |a, b| {
+        format!("from the input: {a}; restarted from the better result: {b}")
+    });
+    let (mesh, kept, from_whole) = match (b_better, a_better) {
+        (true, _) => {
+            if a_better {
+                report.refined = [refined_a, report.refined].concat();
+            }
+            (b, "restart", !a_better)
+        }
+        (false, true) => {
+            report.refined = refined_a;
+            report.converged = false;
+            (a, "alone", false)
+        }
+        (false, false) => (a, "whole", false),
+    };
+    if kept == "alone" {
+        // The figures of the kept (first) run.
+        report.max_flattenability = crate::geometry::max_flattenability(&mesh);
+        report.best_iteration = best_a;
+    }
+    Ok(PartRun {
+        mesh,
+        report,
+        kept,
+        from_whole,
+    })
+}
+
+/// What became of the parts: how many are flattenable, which run each kept, and the others'
+/// ϖ_max (the worst five; every part is in `Report::parts`).
+fn parts_reason(rows: &[PartReport]) -> String {
+    let flat = rows.iter().filter(|p| p.converged).count();
+    let alone = rows.iter().filter(|p| p.kept == "alone").count();
+    let mut failed: Vec<(usize, &PartReport)> = rows
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| !p.converged)
+        .collect();
+    let head = format!(
+        "then the {} independent parts alone: {flat} flattenable ({alone} from their own run)",
+        rows.len()
+    );
+    if failed.is_empty() {
+        return head;
+    }
+    failed.sort_by(|a, b| b.1.max_flattenability.total_cmp(&a.1.max_flattenability));
+    let shown: Vec<String> = failed
+        .iter()
+        .take(5)
+        .map(|(k, p)| {
+            format!(
+                "part {} ({} faces of patch {:?}): ϖ_max {:.2e}",
+                k + 1,
+                p.faces,
+                p.patch,
+                p.max_flattenability
+            )
+        })
+        .collect();
+    let more = match failed.len().saturating_sub(5) {
+        0 => String::new(),
+        m => format!(", and {m} more"),
+    };
+    format!("{head}; not: {}{more}", shown.join(", "))
+}
+
+/// Progress of one part's run in [`solve`], its stage prefixed with the part.
+struct InPart<'a> {
+    control: &'a dyn Control,
+    label: String,
+}
+
+impl Control for InPart<'_> {
+    fn progress(&self, p: &Progress) {
+        self.control.progress(&Progress {
+            stage: format!("{}, {}", self.label, p.stage),
+            ..p.clone()
+        });
+    }
+    fn cancelled(&self) -> bool {
+        self.control.cancelled()
+    }
+    fn cancelled_before(&self, seconds: f64) -> bool {
+        self.control.cancelled_before(seconds)
+    }
 }
 
 /// [`solve`], with every free vertex kept at least `keep.clearance` outside `keep.obstacle`
@@ -541,12 +913,11 @@ pub fn solve_clear_of(
                 report.stop_reason = format!("developable cone{reading}: {}", report.stop_reason);
                 return Ok((out, report));
             }
-            ConeRun::Rejected(why, its) => {
-                spent = its;
+            ConeRun::Rejected(why, report) => {
+                spent = report.iterations;
                 tried = Some(Report {
-                    iterations: its,
                     stop_reason: why,
-                    ..Report::default()
+                    ..report
                 });
             }
         }
@@ -581,9 +952,9 @@ pub fn solve_clear_of(
                     });
                     return Ok((out2, report));
                 }
-                ConeRun::Rejected(why, its) => {
+                ConeRun::Rejected(why, second) => {
                     first.stop_reason = format!("{}; developable cone: {why}", first.stop_reason);
-                    first.iterations += its;
+                    absorb(&mut first, &second);
                 }
             }
         }
@@ -609,7 +980,7 @@ pub fn solve_clear_of(
              (ϖ_max {:.2e}: {})",
             first.stop_reason, second.max_flattenability, second.stop_reason
         );
-        first.iterations += second.iterations;
+        absorb(&mut first, &second);
         Ok((out, first))
     }
 }
@@ -644,15 +1015,15 @@ fn uncrumple(
             Ok((out2, report))
         }
         ConeRun::Accepted(_, second) => {
-            first.iterations += second.iterations;
+            absorb(&mut first, &second);
             first.stop_reason = format!(
                 "{} ({new} new creases past 60°; the developable cone's result creases no less)",
                 first.stop_reason
             );
             Ok((out, first))
         }
-        ConeRun::Rejected(why, its) => {
-            first.iterations += its;
+        ConeRun::Rejected(why, second) => {
+            absorb(&mut first, &second);
             first.stop_reason = format!(
                 "{} ({new} new creases past 60°; developable cone: {why})",
                 first.stop_reason
@@ -694,6 +1065,18 @@ fn curved(mesh: &Mesh) -> Option<String> {
 /// crumpled (the crumpled saddles of the corpus: 8–10 %; the converged domes: 0–0.1 %).
 const CRUMPLED: f64 = 0.01;
 
+/// `first` with the iterations and history of a later run whose result was not taken.
+fn absorb(first: &mut Report, second: &Report) {
+    let offset = first.iterations;
+    first
+        .history
+        .extend(second.history.iter().map(|h| HistoryEntry {
+            iteration: h.iteration + offset,
+            ..*h
+        }));
+    first.iterations += second.iterations;
+}
+
 /// The report of a run that followed `first`: iterations and history counted on from
 /// first's, the stop reason written by `reason(first's, second's)`, the rest second's.
 fn chain(first: Report, second: Report, reason: impl Fn(&str, &str) -> String) -> Report {
@@ -721,7 +1104,7 @@ enum ConeRun {
     /// min(`min_angle`, the input's smallest).
     Accepted(Mesh, Report),
     /// Why not (no cone, or the run's outcome), and the iterations it took.
-    Rejected(String, usize),
+    Rejected(String, Report),
 }
 
 /// A run from the developable cone over the boundary (the `cone` module) with at most
@@ -733,11 +1116,14 @@ fn from_cone(
     control: &dyn Control,
 ) -> Result<ConeRun, AlgoError> {
     if control.cancelled() {
-        return Ok(ConeRun::Rejected("not tried, cancelled".into(), 0));
+        return Ok(ConeRun::Rejected(
+            "not tried, cancelled".into(),
+            Report::default(),
+        ));
     }
     let start = match cone_start(mesh) {
         Ok(start) => start,
-        Err(why) => return Ok(ConeRun::Rejected(format!("none, {why}"), 0)),
+        Err(why) => return Ok(ConeRun::Rejected(format!("none, {why}"), Report::default())),
     };
     let p = Params {
         max_iterations: budget,
@@ -748,7 +1134,7 @@ fn from_cone(
         Err(AlgoError::Cancelled) => {
             return Ok(ConeRun::Rejected(
                 "stopped, cancelled or out of time".into(),
-                0,
+                Report::default(),
             ))
         }
         other => other?,
@@ -777,7 +1163,7 @@ fn from_cone(
     } else {
         return Ok(ConeRun::Accepted(out, report));
     };
-    Ok(ConeRun::Rejected(why, report.iterations))
+    Ok(ConeRun::Rejected(why, report))
 }
 
 /// Progress of a later run of [`solve`] under its own stage names (`newton, no shape

@@ -147,7 +147,10 @@ impl Kind {
                  clear of 0) starts from the developable cone over its boundary, others as \
                  fallback; fallback: a disk \
                  that did not converge, or converged by crumpling, is run again from the \
-                 cone)"
+                 cone), retry=true|false (true: a run that stalled before max_iterations is \
+                 retried, its independent parts alone from the input and then once more from \
+                 their best result, or a one-part mesh from its best result; each run gets \
+                 max_iterations of its own)"
             }
             Kind::Subdivide => {
                 "levels (1; or --levels), curves (or --curves), split_ratio (0.5), \

@@ -310,7 +310,7 @@ fn test(
         cone_start: fl_mesh::ConeStart::Never,
         ..settings.fl_mesh.clone()
     };
-    let (solved, r) = match fl_mesh::solve(&sub, &params, &quiet) {
+    let (solved, r) = match fl_mesh::solve_once(&sub, &params, &quiet) {
         Ok(x) => x,
         Err(AlgoError::Cancelled) => return Err(AlgoError::Cancelled),
         Err(e) => return Ok(refused(format!("fl-mesh failed: {e}"))),

@@ -1,0 +1,408 @@
+//! Independent parts: a mesh's patch components, extracted, solved alone and put back.
+//!
+//! Boundary and seam vertices never move, so the interior vertices of two different connected
+//! parts of a patch share no equation of Eq. 7: each part is a problem of its own, and any
+//! part's result can be combined with any other's. Solved together they still share the step
+//! rule (Armijo on ‖2π − θ‖₂ over all vertices, the trial with the lowest ϖ_max, one damping
+//! μ, one stall window), so one part's trouble changes every other part's path, and the
+//! disk-only developable cone never applies to a garment's disk-shaped parts.
+//!
+//! A part is the faces of one patch reached from each other across edges of that patch, with
+//! the vertices they use. Its free vertices are exactly the whole's free vertices in it: a
+//! seam vertex has faces of another patch outside the part, so it is on the part's
+//! boundary, and a boundary vertex stays one. Parts are extracted and merged back without
+//! changing an unrefined vertex's index or any face's orientation; where that cannot be
+//! guaranteed (a part that fails validation, e.g. a seam vertex whose faces of one patch
+//! form two separate wedges), [`split`] declines and the mesh stays whole.
+
+use crate::mesh::{Mesh, RawMesh, NONE};
+
+/// One part: its own mesh, and where its vertices and faces sit in the whole.
+pub(super) struct Part {
+    pub mesh: Mesh,
+    /// Global index of each of the part's vertices.
+    pub vertices: Vec<u32>,
+    /// Global index of each of the part's faces.
+    pub faces: Vec<u32>,
+}
+
+/// The parts of `mesh` that have an interior vertex, or None when the mesh is one part
+/// (nothing to split) or a part cannot be extracted faithfully.
+pub(super) fn split(mesh: &Mesh) -> Option<Vec<Part>> {
+    let groups = face_groups(mesh);
+    if groups.len() < 2 {
+        return None;
+    }
+    let mut parts = Vec::new();
+    for faces in groups {
+        let part = extract(mesh, faces)?;
+        if part.mesh.conn().interior_vertices().next().is_some() {
+            parts.push(part);
+        }
+    }
+    (parts.len() >= 2).then_some(parts)
+}
+
+/// Faces grouped into patch components (union–find over edges whose two faces share a patch),
+/// each group in increasing face order, groups ordered by their first face.
+fn face_groups(mesh: &Mesh) -> Vec<Vec<u32>> {
+    let nf = mesh.num_faces();
+    let patch = mesh.face_patch();
+    let mut parent: Vec<u32> = (0..nf as u32).collect();
+    fn find(p: &mut [u32], mut x: u32) -> u32 {
+        while p[x as usize] != x {
+            p[x as usize] = p[p[x as usize] as usize];
+            x = p[x as usize];
+        }
+        x
+    }
+    for &[f, g] in mesh.conn().edge_faces() {
+        if g != NONE && patch[f as usize] == patch[g as usize] {
+            let (a, b) = (find(&mut parent, f), find(&mut parent, g));
+            if a != b {
+                parent[a.max(b) as usize] = a.min(b);
+            }
+        }
+    }
+    let mut group_of = vec![NONE; nf];
+    let mut groups: Vec<Vec<u32>> = Vec::new();
+    for f in 0..nf as u32 {
+        let root = find(&mut parent, f) as usize;
+        if group_of[root] == NONE {
+            group_of[root] = groups.len() as u32;
+            groups.push(Vec::new());
+        }
+        groups[group_of[root] as usize].push(f);
+    }
+    groups
+}
+
+/// The part made of `faces`, or None when it does not validate as the same faces with the
+/// same orientation and its free vertices are not the whole mesh's free vertices in it.
+fn extract(mesh: &Mesh, faces: Vec<u32>) -> Option<Part> {
+    let mut local = vec![NONE; mesh.num_vertices()];
+    let mut vertices = Vec::new();
+    let mut triangles = Vec::with_capacity(faces.len());
+    for &f in &faces {
+        let t = mesh.triangles()[f as usize].map(|v| {
+            if local[v as usize] == NONE {
+                local[v as usize] = vertices.len() as u32;
+                vertices.push(v);
+            }
+            local[v as usize]
+        });
+        triangles.push(t);
+    }
+    let patch = mesh.face_patch()[faces[0] as usize] as usize;
+    let raw = RawMesh {
+        positions: vertices.iter().map(|&v| mesh.position(v)).collect(),
+        triangles: triangles.clone(),
+        face_patch: vec![0; faces.len()],
+        patch_names: vec![mesh.patch_names()[patch].clone()],
+        uv: None,
+    };
+    let (sub, _) = Mesh::new(raw).ok()?;
+    let conn = mesh.conn();
+    let faithful = sub.triangles() == &triangles[..]
+        && (0..vertices.len() as u32)
+            .all(|l| sub.conn().is_interior(l) == conn.is_interior(vertices[l as usize]));
+    faithful.then_some(Part {
+        mesh: sub,
+        vertices,
+        faces,
+    })
+}
+
+/// The whole mesh with each part's output put back: moved vertices in place, and where a
+/// part was refined its faces replaced in place and its new faces and vertices appended
+/// (part by part, in their order), so every input index keeps its meaning.
+pub(super) fn merge(mesh: &Mesh, parts: &[Part], outs: &[&Mesh]) -> RawMesh {
+    let mut raw = mesh.to_raw();
+    for (part, out) in parts.iter().zip(outs) {
+        let n = part.vertices.len();
+        let first_new = raw.positions.len() as u32;
+        for (l, &p) in out.positions().iter().enumerate() {
+            if l < n {
+                raw.positions[part.vertices[l] as usize] = p;
+            } else {
+                raw.positions.push(p);
+            }
+        }
+        if out.num_vertices() == n && out.num_faces() == part.faces.len() {
+            continue;
+        }
+        raw.uv = None;
+        let global = |l: u32| global_vertex(part, first_new, l);
+        let patch = raw.face_patch[part.faces[0] as usize];
+        for (k, t) in out.triangles().iter().enumerate() {
+            let t = t.map(global);
+            match part.faces.get(k) {
+                Some(&f) => raw.triangles[f as usize] = t,
+                None => {
+                    raw.triangles.push(t);
+                    raw.face_patch.push(patch);
+                }
+            }
+        }
+    }
+    raw
+}
+
+/// Global index of a part's vertex `l` after [`merge`]: `first_new` is where the part's
+/// appended vertices start in the merged mesh.
+pub(super) fn global_vertex(part: &Part, first_new: u32, l: u32) -> u32 {
+    let n = part.vertices.len() as u32;
+    if l < n {
+        part.vertices[l as usize]
+    } else {
+        first_new + (l - n)
+    }
+}
+
+/// The parts of `out` — a result of the whole `mesh` (refinement appends vertices and faces
+/// and rewrites refined faces in place, within a patch component) — each numbered as its
+/// part (its vertices first, then the new vertices of its refined fans in increasing order;
+/// its faces, then its appended faces in order), so that [`merge`] can put it back, with each
+/// vertex's id in `out`. None when one does not validate as exactly those faces.
+pub(super) fn restrict(out: &Mesh, mesh: &Mesh, parts: &[Part]) -> Option<Vec<(Mesh, Vec<u32>)>> {
+    let (nv, nf) = (mesh.num_vertices(), mesh.num_faces());
+    let mut group_of = vec![NONE; out.num_faces()];
+    for (g, faces) in face_groups(out).iter().enumerate() {
+        for &f in faces {
+            group_of[f as usize] = g as u32;
+        }
+    }
+    let mut appended: Vec<Vec<u32>> = vec![Vec::new(); out.num_faces()];
+    for f in nf..out.num_faces() {
+        appended[group_of[f] as usize].push(f as u32);
+    }
+    let mut local = vec![NONE; out.num_vertices()];
+    parts
+        .iter()
+        .map(|part| {
+            let group = group_of[part.faces[0] as usize] as usize;
+            let faces: Vec<u32> = part.faces.iter().chain(&appended[group]).copied().collect();
+            let mut vertices = part.vertices.clone();
+            let mut new: Vec<u32> = faces
+                .iter()
+                .flat_map(|&f| out.triangles()[f as usize])
+                .filter(|&v| v as usize >= nv)
+                .collect();
+            new.sort_unstable();
+            new.dedup();
+            vertices.extend(new);
+            for (l, &v) in vertices.iter().enumerate() {
+                local[v as usize] = l as u32;
+            }
+            let mut triangles = Vec::with_capacity(faces.len());
+            for &f in &faces {
+                let t = out.triangles()[f as usize].map(|v| local[v as usize]);
+                if t.contains(&NONE) || group_of[f as usize] as usize != group {
+                    return None;
+                }
+                triangles.push(t);
+            }
+            for &v in &vertices {
+                local[v as usize] = NONE;
+            }
+            let raw = RawMesh {
+                positions: vertices.iter().map(|&v| out.position(v)).collect(),
+                triangles: triangles.clone(),
+                face_patch: vec![0; triangles.len()],
+                patch_names: part.mesh.patch_names().to_vec(),
+                uv: None,
+            };
+            let (sub, _) = Mesh::new(raw).ok()?;
+            (sub.triangles() == &triangles[..]).then_some((sub, vertices))
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::RawMesh;
+
+    /// Two unit grids of `k`×`k` cells side by side, sharing the column x = k, as two
+    /// patches (a seam) or one; interior grid points lifted by a pseudo-random 0–0.4.
+    fn two_panels(k: u32, seam: bool) -> Mesh {
+        two_panels_with(k, seam, |i, j| 0.1 * ((i * 7 + j * 3) % 5) as f64)
+    }
+
+    /// [`two_panels`] with the height of grid point (i, j) off the panels' borders given.
+    fn two_panels_with(k: u32, seam: bool, z: impl Fn(u32, u32) -> f64) -> Mesh {
+        let w = 2 * k + 1;
+        let mut positions = Vec::new();
+        for j in 0..=k {
+            for i in 0..w {
+                let inside = i % k != 0 && j % k != 0;
+                positions.push([i as f64, j as f64, if inside { z(i, j) } else { 0.0 }]);
+            }
+        }
+        let mut triangles = Vec::new();
+        let mut face_patch = Vec::new();
+        for j in 0..k {
+            for i in 0..w - 1 {
+                let a = j * w + i;
+                triangles.push([a, a + 1, a + w + 1]);
+                triangles.push([a, a + w + 1, a + w]);
+                let p = u32::from(seam && i >= k);
+                face_patch.extend([p, p]);
+            }
+        }
+        let raw = RawMesh {
+            positions,
+            triangles,
+            face_patch,
+            patch_names: vec!["left".into(), "right".into()],
+            uv: None,
+        };
+        Mesh::new(raw).unwrap().0
+    }
+
+    #[test]
+    fn a_mesh_that_stalls_whole_is_retried_part_by_part_and_never_worse() {
+        use super::super::{solve, Params};
+        use crate::geometry::max_flattenability;
+        // Left: a noisy saddle; right: a noisy dome.
+        let k = 10;
+        let mesh = two_panels_with(k, true, |i, j| {
+            let (x, y) = ((i % k) as f64 - 5.0, j as f64 - 5.0);
+            let noise = 0.15 * ((i * 7 + j * 13) % 5) as f64;
+            noise
+                + if i < k {
+                    0.15 * (x * x - y * y)
+                } else {
+                    0.15 * (50.0 - x * x - y * y)
+                }
+        });
+        // A stall (ϖ_max not halving within two iterations) before the budget.
+        let params = Params {
+            max_iterations: 30,
+            stall_iterations: 2,
+            refine: false,
+            ..Params::default()
+        };
+        let (out, r) = solve(&mesh, &params, &crate::algorithms::Silent::default()).unwrap();
+        assert_eq!(r.parts.len(), 2, "{}", r.stop_reason);
+        assert!(r.stop_reason.starts_with("whole: "), "{}", r.stop_reason);
+        // Every part's figure is its own ϖ_max measured on the output, never above its input's.
+        for (part, row) in split(&mesh).unwrap().iter().zip(&r.parts) {
+            let mine: Vec<[f64; 3]> = part.vertices.iter().map(|&v| out.position(v)).collect();
+            let measured = max_flattenability(&part.mesh.with_positions(mine).unwrap());
+            assert_eq!(row.max_flattenability, measured);
+            assert!(measured <= max_flattenability(&part.mesh));
+            assert_eq!(row.converged, measured <= params.tolerance);
+            assert!(["whole", "alone", "restart"].contains(&row.kept.as_str()));
+        }
+        assert_eq!(r.converged, r.parts.iter().all(|p| p.converged));
+        assert!(max_flattenability(&out) <= max_flattenability(&mesh));
+        assert_eq!(r.max_flattenability, max_flattenability(&out));
+        // Boundary and seam bit-identical; one history over every run.
+        for v in 0..mesh.num_vertices() as u32 {
+            if !mesh.conn().is_interior(v) {
+                assert_eq!(out.position(v), mesh.position(v));
+            }
+        }
+        assert_eq!(r.history.len(), r.iterations);
+        let own: usize = r.parts.iter().map(|p| p.iterations).sum();
+        assert!(own > 0 && r.iterations > own, "{:?}", r.parts);
+        // Here the whole run stalls but each part alone converges (the dome from its cone,
+        // which a mesh of two patches never gets).
+        assert!(r.converged, "{:?}", r.parts);
+        assert!(r.parts.iter().all(|p| p.kept == "alone"), "{:?}", r.parts);
+    }
+
+    #[test]
+    fn a_seam_splits_a_mesh_into_parts_whose_free_vertices_are_the_wholes() {
+        let mesh = two_panels(4, true);
+        let parts = split(&mesh).expect("two patches across a seam are two parts");
+        assert_eq!(parts.len(), 2);
+        let mut free: Vec<u32> = parts
+            .iter()
+            .flat_map(|p| {
+                p.mesh
+                    .conn()
+                    .interior_vertices()
+                    .map(|l| p.vertices[l as usize])
+            })
+            .collect();
+        free.sort_unstable();
+        let whole: Vec<u32> = mesh.conn().interior_vertices().collect();
+        assert_eq!(free, whole);
+        // Every face lands in exactly one part, with its vertices.
+        let mut faces: Vec<u32> = parts.iter().flat_map(|p| p.faces.clone()).collect();
+        faces.sort_unstable();
+        assert_eq!(faces, (0..mesh.num_faces() as u32).collect::<Vec<_>>());
+        for p in &parts {
+            for (k, &f) in p.faces.iter().enumerate() {
+                let t = p.mesh.triangles()[k].map(|l| p.vertices[l as usize]);
+                assert_eq!(t, mesh.triangles()[f as usize]);
+            }
+        }
+        // One patch without the seam: one part, nothing to split.
+        assert!(split(&two_panels(4, false)).is_none());
+    }
+
+    #[test]
+    fn merging_unchanged_parts_gives_back_the_mesh_and_refined_ones_keep_every_index() {
+        let mesh = two_panels(3, true);
+        let parts = split(&mesh).unwrap();
+        let outs: Vec<&Mesh> = parts.iter().map(|p| &p.mesh).collect();
+        let raw = merge(&mesh, &parts, &outs);
+        assert_eq!(raw.positions, mesh.positions());
+        assert_eq!(raw.triangles, mesh.triangles());
+        assert_eq!(raw.face_patch, mesh.face_patch());
+        // Refine one interior vertex of the second part: its faces are replaced in place,
+        // new ones appended with its patch, and every input vertex keeps its position.
+        let second = &parts[1];
+        let v = second.mesh.conn().interior_vertices().next().unwrap();
+        let refined = Mesh::new(super::super::refine_sqrt3(&second.mesh, &[v]))
+            .unwrap()
+            .0;
+        let outs = [&parts[0].mesh, &refined];
+        let raw = merge(&mesh, &parts, &outs);
+        let merged = Mesh::new(raw).unwrap().0;
+        assert_eq!(
+            merged.num_vertices(),
+            mesh.num_vertices() + refined.num_vertices() - second.mesh.num_vertices()
+        );
+        assert_eq!(
+            merged.num_faces(),
+            mesh.num_faces() + refined.num_faces() - second.mesh.num_faces()
+        );
+        assert_eq!(&merged.positions()[..mesh.num_vertices()], mesh.positions());
+        let right = merged.face_patch()[second.faces[0] as usize];
+        assert!(merged.face_patch()[mesh.num_faces()..]
+            .iter()
+            .all(|&p| p == right));
+        // The appended vertices are the centroids that refining the whole at the same vertex
+        // appends (the fans may start at another face, hence sorted).
+        let whole = super::super::refine_sqrt3(&mesh, &[second.vertices[v as usize]]);
+        let sorted = |p: &[[f64; 3]]| {
+            let mut p = p.to_vec();
+            p.sort_by(|a, b| a.partial_cmp(b).unwrap());
+            p
+        };
+        let n = mesh.num_vertices();
+        assert_eq!(
+            sorted(&merged.positions()[n..]),
+            sorted(&whole.positions[n..])
+        );
+        let first_new = mesh.num_vertices() as u32;
+        assert_eq!(
+            global_vertex(second, first_new, second.mesh.num_vertices() as u32),
+            first_new
+        );
+        // Restricting the whole's refinement gives each part back as the part's refinement.
+        let whole = Mesh::new(whole).unwrap().0;
+        let back = restrict(&whole, &mesh, &parts).expect("the refined whole splits back");
+        assert_eq!(back[0].0.positions(), parts[0].mesh.positions());
+        assert_eq!(back[1].0.num_vertices(), refined.num_vertices());
+        assert_eq!(back[1].0.num_faces(), refined.num_faces());
+        let outs: Vec<&Mesh> = back.iter().map(|(m, _)| m).collect();
+        let again = merge(&mesh, &parts, &outs);
+        assert_eq!(sorted(&again.positions), sorted(whole.positions()));
+        assert_eq!(again.triangles.len(), whole.num_faces());
+    }
+}
