@@ -425,7 +425,8 @@ pub struct Report {
     pub iterations: usize,
     /// The iteration whose iterate is returned (0: the input, or the developable cone's start
     /// when the stop reason says the result came from the cone): the best by ϖ_max, the
-    /// latest among flattenable ones.
+    /// latest among flattenable ones. After retries, that of the run last taken (a mesh kept
+    /// part by part has one per part; this is then the whole run's).
     pub best_iteration: usize,
     /// ϖ_max ≤ tolerance on the output (and the step criterion, for `until = stationary`).
     pub converged: bool,
@@ -444,8 +445,8 @@ pub struct Report {
     pub stationarity: f64,
     /// Number of unknown (interior, free) vertices at the end.
     pub free_vertices: usize,
-    /// When the whole run did not converge and the mesh has several independent parts (its
-    /// patch components; see [`solve`]): each part's outcome, in the order of their first
+    /// When the whole run stalled, `retry` is on and the mesh has several independent parts
+    /// (its patch components; see [`solve`]): each part's outcome, in the order of their first
     /// faces. Empty otherwise.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub parts: Vec<PartReport>,
@@ -460,16 +461,17 @@ pub struct PartReport {
     pub faces: usize,
     /// Its interior (free) vertices in the input.
     pub interior_vertices: usize,
-    /// Which result it kept: "whole" (the whole mesh's run) or "alone" (its own run).
+    /// Which result it kept: "whole" (the whole mesh's run), "alone" (its own run from the
+    /// input) or "restart" (its run from the better of those two).
     pub kept: String,
     /// ϖ_max ≤ tolerance on the kept result.
     pub converged: bool,
     /// ϖ_max of the kept result.
     pub max_flattenability: f64,
-    /// Iterations of its own run (0 when it was flattenable in the whole run's result, or a
+    /// Iterations of its own runs (0 when it was flattenable in the whole run's result, or a
     /// closed component that cannot be).
     pub iterations: usize,
-    /// Why its own run ended ("" when there was none).
+    /// Why its own runs ended ("" when there were none).
     pub stop_reason: String,
 }
 
@@ -521,58 +523,80 @@ pub fn run(
 /// result instead of the input was measured worse (worksuit 0.18 rad). With `shape_guard`,
 /// neither run folds.
 ///
-/// Retries (`retry`, default on). A run that stalled — ended unconverged before
-/// `max_iterations` — is tried again, each new run with its own `max_iterations`, so a stalled
-/// mesh may take up to three times the budget. A mesh of several independent parts (the
-/// connected parts of its patches; the `parts` module) runs every part still above the
-/// tolerance alone from the input, in parallel, and, where that does not converge, once more
-/// from the better of the part's two results (a restart: anchors, damping, fairing weight and
-/// stall window afresh); each part keeps the best of its results (flattenable first, then the
-/// lower ϖ_max: the issue's merit; the penalised-first choice above is made inside each
-/// run). Parts share no equation, so the combination is as valid as any one run and never
-/// worse part by part. A mesh of one part gets the restart from the whole run's result.
-/// The report then chains every run's iterations and history, lists each part in `parts`, and
-/// measures ϖ_max and the stuck vertices on the combined output. Measured on the real meshes
-/// (issue 12 note): mh_female_sportsuit01 converges (stalled at 2.0e-3 before); ϖ_max falls on
-/// five more (diffavatar_shirt_artist 1.4e-3 → 4.2e-4, mh_shoes01 1.3e-2 → 8.3e-3), and
-/// every mesh that converged whole is untouched.
+/// Retries (`retry`, default on; not with `until = stationary`). A run that stalled — ended
+/// unconverged before `max_iterations` — is tried again, each new run with its own
+/// `max_iterations`. A mesh of several independent parts (the connected parts of its patches;
+/// the `parts` module) runs every part still above the tolerance alone from the input, in
+/// parallel, and, where that does not converge, once more from the better of the part's two
+/// results (a restart: anchors, damping, fairing weight, stall window and the cone's fold and
+/// corner baselines start afresh there); each part keeps the best of its results
+/// (flattenable first, then the lower ϖ_max: the issue's merit; the penalised-first choice
+/// above is made inside each run). Parts share no constraint, only the shape penalty's
+/// hinges across a seam, which a part alone does not see: a part whose result, combined,
+/// folds a seam edge that the whole run's result did not fold gives it up. A part keeps the
+/// whole run's result when its own runs fail or are stopped. So no part takes more than three
+/// times `max_iterations`; the reported `iterations` (every run's, chained in `history`,
+/// whose ϖ_max is then each run's own mesh's) can reach (1 + 2·parts)·`max_iterations`.
+/// A mesh of one part, or whose result cannot be split faithfully, gets the restart from the
+/// whole run's result. The report lists each part in `parts` and measures ϖ_max, the stuck
+/// and the free vertices on the combined output. Measured on the real meshes (issue 12
+/// note): mh_female_sportsuit01 converges (stalled at 2.0e-3 before); ϖ_max falls on five
+/// more (diffavatar_shirt_artist 1.4e-3 → 4.2e-4, mh_shoes01 1.3e-2 → 8.3e-3), and every
+/// mesh that converged whole is untouched.
 pub fn solve(
     mesh: &Mesh,
     params: &Params,
     control: &dyn Control,
 ) -> Result<(Mesh, Report), AlgoError> {
-    let (whole_out, mut whole) = solve_clear_of(mesh, params, None, control)?;
-    if whole.converged {
+    let (whole_out, whole) = solve_clear_of(mesh, params, None, control)?;
+    // Only a stall is retried: a run cut short by `max_iterations` was given its budget, and
+    // `until = stationary` asks for the paper's stationary point of this run.
+    if whole.converged
+        || !params.retry
+        || params.until == Until::Stationary
+        || whole.iterations >= params.max_iterations
+    {
         return Ok((whole_out, whole));
     }
-    // Only a stall is retried: a run cut short by `max_iterations` was given its budget.
-    if !params.retry || whole.iterations >= params.max_iterations {
-        return Ok((whole_out, whole));
+    match parts::split(mesh) {
+        Some(split) => match retry_parts(mesh, &split, whole_out, whole, params, control) {
+            Ok(done) => Ok(done),
+            Err(back) => {
+                let (whole_out, whole) = *back;
+                restart(mesh, whole_out, whole, params, control)
+            }
+        },
+        None => restart(mesh, whole_out, whole, params, control),
     }
-    let Some(split) = parts::split(mesh) else {
-        return restart(mesh, whole_out, whole, params, control);
-    };
+}
+
+/// The parts stage of [`solve`]: each unconverged part run alone ([`retry_part`]), each part
+/// keeping its best result, merged. Gives the whole run back (Err) when its result cannot be
+/// split into the parts faithfully.
+fn retry_parts(
+    mesh: &Mesh,
+    split: &[parts::Part],
+    whole_out: Mesh,
+    mut whole: Report,
+    params: &Params,
+    control: &dyn Control,
+) -> Result<(Mesh, Report), Box<(Mesh, Report)>> {
     // Each part of the whole run's result, with its vertices' ids in that result.
-    let Some(from_whole) = parts::restrict(&whole_out, mesh, &split) else {
-        return Ok((whole_out, whole));
+    let Some(from_whole) = parts::restrict(&whole_out, mesh, split) else {
+        return Err(Box::new((whole_out, whole)));
     };
     let wmax = |m: &Mesh| crate::geometry::max_flattenability(m);
-    let retry: Vec<bool> = from_whole
-        .iter()
-        .zip(&split)
-        .map(|((m, _), part)| {
-            wmax(m) > params.tolerance && !impossible_vertices(&part.mesh).contains(&true)
-        })
-        .collect();
     let total = split.len();
-    let alone: Vec<Option<Result<PartRun, AlgoError>>> = {
+    let runs: Vec<Option<Result<PartRun, AlgoError>>> = {
         use rayon::prelude::*;
         split
             .par_iter()
-            .zip(&retry)
             .zip(&from_whole)
             .enumerate()
-            .map(|(k, ((part, &retry), (w, _)))| {
+            .map(|(k, (part, (w, _)))| {
+                // A closed part whose χ ≠ 0 is a proven obstruction: nothing to retry.
+                let retry =
+                    wmax(w) > params.tolerance && !impossible_vertices(&part.mesh).contains(&true);
                 retry.then(|| {
                     let label = InPart {
                         control,
@@ -583,27 +607,55 @@ pub fn solve(
             })
             .collect()
     };
-    let mut runs = Vec::with_capacity(total);
-    for run in alone {
-        match run {
-            Some(Err(AlgoError::Cancelled)) => {
-                // An optional stage stopped (cancel or time limit): keep the whole run.
-                whole.stop_reason = format!(
-                    "{}; the parts alone: stopped, cancelled or out of time",
-                    whole.stop_reason
-                );
-                return Ok((whole_out, whole));
+    // A part whose own run failed or was stopped keeps the whole run's result.
+    let mut failed = Vec::new();
+    let runs: Vec<Option<PartRun>> = runs
+        .into_iter()
+        .enumerate()
+        .map(|(k, run)| match run {
+            Some(Ok(run)) => Some(run),
+            Some(Err(e)) => {
+                failed.push(format!("part {}: {e}", k + 1));
+                None
             }
-            Some(run) => runs.push(Some(run?)),
-            None => runs.push(None),
+            None => None,
+        })
+        .collect();
+    // Which parts take their own result: flattenable first, then the lower ϖ_max.
+    // (`retry_part` names "whole" when neither of its runs beat the whole run's result.)
+    let mut own: Vec<bool> = runs
+        .iter()
+        .map(|run| run.as_ref().is_some_and(|r| r.kept != "whole"))
+        .collect();
+    // Parts share no constraint, but the shape penalty's hinges across a seam see both sides:
+    // a part that, combined, folds a seam edge the whole run did not fold gives its result up.
+    let out = loop {
+        let chosen: Vec<&Mesh> = (0..total)
+            .map(|k| match (&runs[k], own[k]) {
+                (Some(run), true) => &run.mesh,
+                _ => &from_whole[k].0,
+            })
+            .collect();
+        let raw = parts::merge(mesh, split, &chosen);
+        let merged = match Mesh::new(raw.clone()) {
+            Ok((m, _)) if m.triangles() == &raw.triangles[..] => m,
+            _ => return Err(Box::new((whole_out, whole))),
+        };
+        let folds = parts::new_seam_folds(mesh, split, &whole_out, &merged);
+        let back: Vec<usize> = folds.into_iter().filter(|&k| own[k]).collect();
+        if back.is_empty() {
+            break merged;
         }
-    }
+        for k in back {
+            own[k] = false;
+        }
+    };
     let whole_refined = std::mem::take(&mut whole.refined);
     let mut report = whole;
-    let mut chosen: Vec<&Mesh> = Vec::with_capacity(total);
     // New (refinement) vertices of the kept results are appended part by part.
     let mut first_new = mesh.num_vertices() as u32;
-    for ((part, (w, w_vertices)), run) in split.iter().zip(&from_whole).zip(&runs) {
+    for (k, part) in split.iter().enumerate() {
+        let (w, w_vertices) = &from_whole[k];
         let w_whole = wmax(w);
         let mut row = PartReport {
             patch: part.mesh.patch_names()[0].clone(),
@@ -614,26 +666,24 @@ pub fn solve(
             max_flattenability: w_whole,
             ..PartReport::default()
         };
-        let mut kept = w;
         // The whole run's refined vertices that are this part's, in its local numbering.
+        let mut local = vec![NONE; whole_out.num_vertices()];
+        for (l, &v) in w_vertices.iter().enumerate() {
+            local[v as usize] = l as u32;
+        }
         let local_whole: Vec<u32> = whole_refined
             .iter()
-            .filter_map(|&v| w_vertices.iter().position(|&u| u == v).map(|l| l as u32))
+            .map(|&v| local[v as usize])
+            .filter(|&l| l != NONE)
             .collect();
         let mut refined = local_whole.clone();
-        if let Some(run) = run {
+        let mut kept = w;
+        if let Some(run) = &runs[k] {
             let r = &run.report;
-            let offset = report.iterations;
-            report
-                .history
-                .extend(r.history.iter().map(|h| HistoryEntry {
-                    iteration: h.iteration + offset,
-                    ..*h
-                }));
-            report.iterations += r.iterations;
+            absorb(&mut report, r);
             row.iterations = r.iterations;
             row.stop_reason = r.stop_reason.clone();
-            if run.kept != "whole" {
+            if own[k] {
                 kept = &run.mesh;
                 refined = if run.from_whole {
                     [local_whole, r.refined.clone()].concat()
@@ -643,9 +693,11 @@ pub fn solve(
                 row.kept = run.kept.into();
                 row.converged = r.converged;
                 row.max_flattenability = r.max_flattenability;
-                if r.best_iteration > 0 {
-                    report.best_iteration = offset + r.best_iteration;
-                }
+            } else if run.kept != "whole" {
+                row.stop_reason = format!(
+                    "{}; not kept: combined with the other parts it folds a seam edge",
+                    row.stop_reason
+                );
             }
         }
         report.refined.extend(
@@ -654,13 +706,8 @@ pub fn solve(
                 .map(|l| parts::global_vertex(part, first_new, l)),
         );
         first_new += (kept.num_vertices() - part.vertices.len()) as u32;
-        chosen.push(kept);
         report.parts.push(row);
     }
-    // Each part validated, and merging changes no face that a part did not.
-    let out = Mesh::new(parts::merge(mesh, &split, &chosen))
-        .map_err(|e| AlgoError::Input(format!("merging the parts: {e}")))?
-        .0;
     // The verdict from the combined mesh's own angles, as for a whole run.
     let theta = crate::geometry::angle_sums(&out);
     let varpi = crate::geometry::flattenability(&out, &theta);
@@ -671,13 +718,26 @@ pub fn solve(
     report
         .stuck_vertices
         .sort_by(|a, b| varpi[*b as usize].total_cmp(&varpi[*a as usize]));
+    let impossible = impossible_vertices(&out);
+    report.free_vertices = out
+        .conn()
+        .interior_vertices()
+        .filter(|&v| !impossible[v as usize])
+        .count();
     report.converged =
         report.parts.iter().all(|p| p.converged) && report.max_flattenability <= params.tolerance;
-    report.stop_reason = format!(
+    let mut reason = format!(
         "whole: {}; {}",
         report.stop_reason,
         parts_reason(&report.parts)
     );
+    if !failed.is_empty() {
+        reason = format!(
+            "{reason}; kept the whole run's result where a part's own run failed ({})",
+            failed.join(", ")
+        );
+    }
+    report.stop_reason = reason;
     Ok((out, report))
 }
 
@@ -775,7 +835,21 @@ fn retry_part(
         });
     }
     let start = if a_better { &a } else { whole };
-    let (b, rb) = solve_clear_of(start, params, None, &Renamed(control, "restart"))?;
+    let (b, rb) = match solve_clear_of(start, params, None, &Renamed(control, "restart")) {
+        Ok(done) => done,
+        // Stopped or failed: the first run's result stands.
+        Err(e) => {
+            let mut report = ra;
+            report.stop_reason = format!("{}; restart: {e}", report.stop_reason);
+            let kept = if a_better { "alone" } else { "whole" };
+            return Ok(PartRun {
+                mesh: a,
+                report,
+                kept,
+                from_whole: false,
+            });
+        }
+    };
     let b_better = rb.converged || rb.max_flattenability < ra.max_flattenability.min(w_whole);
     let (refined_a, best_a) = (ra.refined.clone(), ra.best_iteration);
     let mut report = chain(ra, rb, |a, b| {
