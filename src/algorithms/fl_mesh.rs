@@ -446,8 +446,8 @@ pub struct Report {
     /// Number of unknown (interior, free) vertices at the end.
     pub free_vertices: usize,
     /// When the whole run stalled, `retry` is on and the mesh has several independent parts
-    /// (its patch components; see [`solve`]): each part's outcome, in the order of their first
-    /// faces. Empty otherwise.
+    /// (its patch components; see [`solve`]): each part's outcome, in patch order, then by
+    /// first face. Empty otherwise.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub parts: Vec<PartReport>,
 }
@@ -455,7 +455,8 @@ pub struct Report {
 /// The outcome of one independent part of a mesh (a connected part of one patch).
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct PartReport {
-    /// The part's patch.
+    /// The part's patch name, `#k` appended when the patch has several parts (as `flatten`
+    /// names its pieces).
     pub patch: String,
     /// Its faces in the input.
     pub faces: usize,
@@ -658,7 +659,7 @@ fn retry_parts(
         let (w, w_vertices) = &from_whole[k];
         let w_whole = wmax(w);
         let mut row = PartReport {
-            patch: part.mesh.patch_names()[0].clone(),
+            patch: part.name.clone(),
             faces: part.faces.len(),
             interior_vertices: part.mesh.conn().interior_vertices().count(),
             kept: "whole".into(),
@@ -709,15 +710,7 @@ fn retry_parts(
         report.parts.push(row);
     }
     // The verdict from the combined mesh's own angles, as for a whole run.
-    let theta = crate::geometry::angle_sums(&out);
-    let varpi = crate::geometry::flattenability(&out, &theta);
-    report.max_flattenability = varpi.iter().copied().fold(0.0, f64::max);
-    report.stuck_vertices = (0..varpi.len() as u32)
-        .filter(|&v| varpi[v as usize] > params.tolerance)
-        .collect();
-    report
-        .stuck_vertices
-        .sort_by(|a, b| varpi[*b as usize].total_cmp(&varpi[*a as usize]));
+    (report.max_flattenability, report.stuck_vertices) = verdict(&out, params.tolerance);
     let impossible = impossible_vertices(&out);
     report.free_vertices = out
         .conn()
@@ -784,14 +777,7 @@ fn restart(
         report.refined = [refined, report.refined].concat();
         return Ok((again, report));
     }
-    let offset = first.iterations;
-    first
-        .history
-        .extend(second.history.iter().map(|h| HistoryEntry {
-            iteration: h.iteration + offset,
-            ..*h
-        }));
-    first.iterations += second.iterations;
+    absorb(&mut first, &second);
     first.stop_reason = format!(
         "{}; restarted from the best iterate, which did not lower ϖ_max ({:.2e}: {})",
         first.stop_reason, second.max_flattenability, second.stop_reason
@@ -1398,15 +1384,7 @@ fn solve_phase(
         report.best_iteration = 0;
     }
     // The verdict comes from the mesh core's own measure, not from the solver's numbers.
-    let theta = crate::geometry::angle_sums(&current);
-    let varpi = crate::geometry::flattenability(&current, &theta);
-    report.max_flattenability = varpi.iter().copied().fold(0.0, f64::max);
-    report.stuck_vertices = (0..varpi.len() as u32)
-        .filter(|&v| varpi[v as usize] > params.tolerance)
-        .collect();
-    report
-        .stuck_vertices
-        .sort_by(|a, b| varpi[*b as usize].total_cmp(&varpi[*a as usize]));
+    (report.max_flattenability, report.stuck_vertices) = verdict(&current, params.tolerance);
     let mut flat = report.max_flattenability <= params.tolerance;
     if let (Some(k), true) = (keep, flat) {
         let h = crate::geometry::mean_edge_length(&current);
@@ -1440,6 +1418,18 @@ fn solve_phase(
         );
     }
     Ok((current, report))
+}
+
+/// ϖ_max of `mesh` measured by `geometry`, and its interior vertices above `tolerance`, worst
+/// first.
+fn verdict(mesh: &Mesh, tolerance: f64) -> (f64, Vec<u32>) {
+    let theta = crate::geometry::angle_sums(mesh);
+    let varpi = crate::geometry::flattenability(mesh, &theta);
+    let mut stuck: Vec<u32> = (0..varpi.len() as u32)
+        .filter(|&v| varpi[v as usize] > tolerance)
+        .collect();
+    stuck.sort_by(|a, b| varpi[*b as usize].total_cmp(&varpi[*a as usize]));
+    (varpi.iter().copied().fold(0.0, f64::max), stuck)
 }
 
 /// Vertices of closed components (no boundary or seam vertex) whose Euler characteristic is not

@@ -482,6 +482,57 @@ fn check_uv(uv: &UvLayer, faces: usize) -> Result<(), MeshError> {
     Ok(())
 }
 
+/// The pieces of a mesh (flatten's pattern pieces, fl-mesh's independent parts): one per
+/// connected component of each patch, in patch order, as its name (the patch
+/// name, `#k` appended when a patch has several components) and its faces.
+pub fn patch_components(mesh: &Mesh) -> Vec<(String, Vec<u32>)> {
+    let nf = mesh.num_faces();
+    let fp = mesh.face_patch();
+    let mut parent: Vec<u32> = (0..nf as u32).collect();
+    fn find(p: &mut [u32], mut x: u32) -> u32 {
+        while p[x as usize] != x {
+            let q = p[x as usize];
+            p[x as usize] = p[q as usize];
+            x = q;
+        }
+        x
+    }
+    for ef in mesh.conn().edge_faces() {
+        if ef[1] != NONE && fp[ef[0] as usize] == fp[ef[1] as usize] {
+            let (a, b) = (find(&mut parent, ef[0]), find(&mut parent, ef[1]));
+            if a != b {
+                parent[a.max(b) as usize] = a.min(b);
+            }
+        }
+    }
+    let mut comps: Vec<Vec<Vec<u32>>> = vec![Vec::new(); mesh.num_patches()];
+    let mut comp_of_root: std::collections::HashMap<u32, (usize, usize)> =
+        std::collections::HashMap::new();
+    for f in 0..nf as u32 {
+        let r = find(&mut parent, f);
+        let p = fp[f as usize] as usize;
+        let (pp, k) = *comp_of_root.entry(r).or_insert_with(|| {
+            comps[p].push(Vec::new());
+            (p, comps[p].len() - 1)
+        });
+        comps[pp][k].push(f);
+    }
+    let mut out = Vec::new();
+    for (p, cs) in comps.into_iter().enumerate() {
+        let many = cs.len() > 1;
+        for (k, faces) in cs.into_iter().enumerate() {
+            let base = &mesh.patch_names()[p];
+            let name = if many {
+                format!("{base}#{}", k + 1)
+            } else {
+                base.clone()
+            };
+            out.push((name, faces));
+        }
+    }
+    out
+}
+
 /// The bounding box of points.
 pub fn bbox_of(points: impl Iterator<Item = [f64; 3]>) -> ([f64; 3], [f64; 3]) {
     let mut lo = [f64::INFINITY; 3];

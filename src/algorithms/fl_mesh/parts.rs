@@ -20,6 +20,9 @@ use crate::mesh::{Mesh, RawMesh, NONE};
 
 /// One part: its own mesh, and where its vertices and faces sit in the whole.
 pub(super) struct Part {
+    /// The patch's name, `#k` appended when the patch has several parts (as flatten names
+    /// its pieces).
+    pub name: String,
     pub mesh: Mesh,
     /// Global index of each of the part's vertices.
     pub vertices: Vec<u32>,
@@ -30,13 +33,13 @@ pub(super) struct Part {
 /// The parts of `mesh` that have an interior vertex, or None when the mesh is one part
 /// (nothing to split) or a part cannot be extracted faithfully.
 pub(super) fn split(mesh: &Mesh) -> Option<Vec<Part>> {
-    let groups = face_groups(mesh);
+    let groups = crate::mesh::patch_components(mesh);
     if groups.len() < 2 {
         return None;
     }
     let mut parts = Vec::new();
-    for faces in groups {
-        let part = extract(mesh, faces)?;
+    for (name, faces) in groups {
+        let part = extract(mesh, name, faces)?;
         if part.mesh.conn().interior_vertices().next().is_some() {
             parts.push(part);
         }
@@ -44,43 +47,9 @@ pub(super) fn split(mesh: &Mesh) -> Option<Vec<Part>> {
     (parts.len() >= 2).then_some(parts)
 }
 
-/// Faces grouped into patch components (union–find over edges whose two faces share a patch),
-/// each group in increasing face order, groups ordered by their first face.
-fn face_groups(mesh: &Mesh) -> Vec<Vec<u32>> {
-    let nf = mesh.num_faces();
-    let patch = mesh.face_patch();
-    let mut parent: Vec<u32> = (0..nf as u32).collect();
-    fn find(p: &mut [u32], mut x: u32) -> u32 {
-        while p[x as usize] != x {
-            p[x as usize] = p[p[x as usize] as usize];
-            x = p[x as usize];
-        }
-        x
-    }
-    for &[f, g] in mesh.conn().edge_faces() {
-        if g != NONE && patch[f as usize] == patch[g as usize] {
-            let (a, b) = (find(&mut parent, f), find(&mut parent, g));
-            if a != b {
-                parent[a.max(b) as usize] = a.min(b);
-            }
-        }
-    }
-    let mut group_of = vec![NONE; nf];
-    let mut groups: Vec<Vec<u32>> = Vec::new();
-    for f in 0..nf as u32 {
-        let root = find(&mut parent, f) as usize;
-        if group_of[root] == NONE {
-            group_of[root] = groups.len() as u32;
-            groups.push(Vec::new());
-        }
-        groups[group_of[root] as usize].push(f);
-    }
-    groups
-}
-
 /// The part made of `faces`, or None when it does not validate as the same faces with the
 /// same orientation and its free vertices are not the whole mesh's free vertices in it.
-fn extract(mesh: &Mesh, faces: Vec<u32>) -> Option<Part> {
+fn extract(mesh: &Mesh, name: String, faces: Vec<u32>) -> Option<Part> {
     let mut local = vec![NONE; mesh.num_vertices()];
     let mut vertices = Vec::new();
     let mut triangles = Vec::with_capacity(faces.len());
@@ -108,6 +77,7 @@ fn extract(mesh: &Mesh, faces: Vec<u32>) -> Option<Part> {
         && (0..vertices.len() as u32)
             .all(|l| sub.conn().is_interior(l) == conn.is_interior(vertices[l as usize]));
     faithful.then_some(Part {
+        name,
         mesh: sub,
         vertices,
         faces,
@@ -168,7 +138,7 @@ pub(super) fn global_vertex(part: &Part, first_new: u32, l: u32) -> u32 {
 pub(super) fn restrict(out: &Mesh, mesh: &Mesh, parts: &[Part]) -> Option<Vec<(Mesh, Vec<u32>)>> {
     let (nv, nf) = (mesh.num_vertices(), mesh.num_faces());
     let mut group_of = vec![NONE; out.num_faces()];
-    for (g, faces) in face_groups(out).iter().enumerate() {
+    for (g, (_, faces)) in crate::mesh::patch_components(out).iter().enumerate() {
         for &f in faces {
             group_of[f as usize] = g as u32;
         }

@@ -423,55 +423,6 @@ pub struct PieceInfo {
     pub real_cut_paths: Vec<Vec<u32>>,
 }
 
-/// The pieces of a mesh: one per connected component of each patch, as its name (the patch
-/// name, `#k` appended when a patch has several components) and its faces.
-pub fn components(mesh: &Mesh) -> Vec<(String, Vec<u32>)> {
-    let nf = mesh.num_faces();
-    let fp = mesh.face_patch();
-    let mut parent: Vec<u32> = (0..nf as u32).collect();
-    fn find(p: &mut [u32], mut x: u32) -> u32 {
-        while p[x as usize] != x {
-            let q = p[x as usize];
-            p[x as usize] = p[q as usize];
-            x = q;
-        }
-        x
-    }
-    for ef in mesh.conn().edge_faces() {
-        if ef[1] != NONE && fp[ef[0] as usize] == fp[ef[1] as usize] {
-            let (a, b) = (find(&mut parent, ef[0]), find(&mut parent, ef[1]));
-            if a != b {
-                parent[a.max(b) as usize] = a.min(b);
-            }
-        }
-    }
-    let mut comps: Vec<Vec<Vec<u32>>> = vec![Vec::new(); mesh.num_patches()];
-    let mut comp_of_root: HashMap<u32, (usize, usize)> = HashMap::new();
-    for f in 0..nf as u32 {
-        let r = find(&mut parent, f);
-        let p = fp[f as usize] as usize;
-        let (pp, k) = *comp_of_root.entry(r).or_insert_with(|| {
-            comps[p].push(Vec::new());
-            (p, comps[p].len() - 1)
-        });
-        comps[pp][k].push(f);
-    }
-    let mut out = Vec::new();
-    for (p, cs) in comps.into_iter().enumerate() {
-        let many = cs.len() > 1;
-        for (k, faces) in cs.into_iter().enumerate() {
-            let base = &mesh.patch_names()[p];
-            let name = if many {
-                format!("{base}#{}", k + 1)
-            } else {
-                base.clone()
-            };
-            out.push((name, faces));
-        }
-    }
-    out
-}
-
 /// Where a piece is in the input, for messages: its patch (OBJ group, glTF primitive) and the
 /// range of its triangles in mesh order.
 fn describe(name: &str, faces: &[u32]) -> String {
@@ -1072,7 +1023,7 @@ pub fn run(
         .input_unit
         .fixed()
         .unwrap_or_else(|| Unit::guess(diagonal));
-    let comps = components(mesh);
+    let comps = crate::mesh::patch_components(mesh);
     let t_topo = t0.elapsed().as_secs_f64();
     let results: Vec<Result<(Piece, PieceInfo), AlgoError>> = comps
         .par_iter()
