@@ -758,15 +758,12 @@ fn restart(
         return Ok((out, first));
     }
     let (again, second) = match solve_clear_of(&out, params, None, &Renamed(control, "restart")) {
-        // An optional stage stopped (cancel or time limit): keep the first run.
-        Err(AlgoError::Cancelled) => {
-            first.stop_reason = format!(
-                "{}; restart: stopped, cancelled or out of time",
-                first.stop_reason
-            );
+        Ok(done) => done,
+        // An optional stage stopped (cancel or time limit) or failed: the first run stands.
+        Err(e) => {
+            first.stop_reason = format!("{}; restart: {e}", first.stop_reason);
             return Ok((out, first));
         }
-        other => other?,
     };
     if second.converged || second.max_flattenability < first.max_flattenability {
         // The restart's numbering extends the first run's (refinement appends).
