@@ -113,6 +113,38 @@ impl Procedural {
     }
 }
 
+/// A pouch: the unit sphere with a hole, the inverse stereographic image of a `cells` ×
+/// `cells` grid over [−3, 3]² (the square's image is a wavy loop 143°–153° from the south
+/// pole), so the patch wraps past its equator and is no height field over any plane. Its
+/// area is about 11 times the isoperimetric bound P²/4π of its opening, as the upper of a
+/// shoe is (mh_shoes01: 10.9). Conformal, so its triangles keep their shapes while their
+/// sizes vary tenfold. Not in [`procedural`]: a case for the cone start's harmonic layout.
+pub fn pouch(cells: usize) -> Mesh {
+    let cells = cells.max(2);
+    let f = |i: usize, j: usize| -> [f64; 3] {
+        let (x, y) = (
+            6.0 * i as f64 / cells as f64 - 3.0,
+            6.0 * j as f64 / cells as f64 - 3.0,
+        );
+        let r2 = x * x + y * y;
+        [
+            2.0 * x / (1.0 + r2),
+            2.0 * y / (1.0 + r2),
+            (r2 - 1.0) / (1.0 + r2),
+        ]
+    };
+    let (positions, triangles, _) = grid(cells, cells, false, f, |_, _| true);
+    let n = triangles.len();
+    let raw = RawMesh {
+        positions,
+        triangles,
+        face_patch: vec![0; n],
+        patch_names: vec!["pouch".into()],
+        uv: None,
+    };
+    Mesh::new(raw).expect("procedural mesh is valid").0
+}
+
 /// The procedural corpus: every family at three sizes (saddles and domes from 2k to 45k faces)
 /// and two noise levels.
 pub fn procedural() -> Vec<Procedural> {

@@ -388,6 +388,59 @@ fn creases(mesh: &Mesh) -> usize {
         .count()
 }
 
+/// A pouch (a sphere with a hole, past its equator, like a shoe's upper) is no height field
+/// and holds 11 times the area any flat disk with its opening can have: by default it ends
+/// flattenable on the developable cone over its opening (from the harmonic layout), measured
+/// from the output's angles; no fold, boundary bit-identical; and the output obeys the
+/// isoperimetric inequality that makes it flattenable (area ≤ P²/4π, recomputed here from
+/// the positions), which the stop reason names.
+#[test]
+fn a_pouch_ends_flattenable_on_the_cone_over_its_opening() {
+    let mesh = corpus::pouch(24);
+    let params = Params::default();
+    let (_, w_out, converged) = check_never_worse("pouch-24", &mesh, &params);
+    assert!(converged && w_out <= 1e-6, "ϖ_max {w_out:e}");
+    let (out, r) = fl_mesh::solve(&mesh, &params, &Silent::default()).expect("runs");
+    let m = corpus::measure(&mesh, &out);
+    assert_eq!(m.folds_out, 0);
+    let area = |x: &Mesh| -> f64 {
+        x.triangles()
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|v| x.position(v));
+                let (u, w) = (
+                    [0, 1, 2].map(|k| b[k] - a[k]),
+                    [0, 1, 2].map(|k| c[k] - a[k]),
+                );
+                let n = [
+                    u[1] * w[2] - u[2] * w[1],
+                    u[2] * w[0] - u[0] * w[2],
+                    u[0] * w[1] - u[1] * w[0],
+                ];
+                0.5 * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt()
+            })
+            .sum()
+    };
+    let ring = &mesh.conn().boundary_loops()[0];
+    let p: f64 = (0..ring.len())
+        .map(|i| {
+            let (a, b) = (
+                mesh.position(ring[i]),
+                mesh.position(ring[(i + 1) % ring.len()]),
+            );
+            ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+        })
+        .sum();
+    let bound = p * p / (4.0 * std::f64::consts::PI);
+    assert!(area(&mesh) > 5.0 * bound, "{} vs {bound}", area(&mesh));
+    assert!(area(&out) <= bound, "{} vs {bound}", area(&out));
+    assert!(
+        r.stop_reason.contains("developable cone") && r.stop_reason.contains("isoperimetric"),
+        "{}",
+        r.stop_reason
+    );
+}
+
 /// With `fallback`, a noisy saddle that the run from the input makes flattenable only by
 /// crumpling it (hundreds of edges turning past 60°) is handed to the developable cone, whose
 /// result is smooth: flattenable, no new fold, and creases on under 1 % of the edges.

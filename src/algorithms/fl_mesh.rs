@@ -105,7 +105,7 @@
 //!   admits no flattenable surface near the input (saddles, whose linearised constraint is a
 //!   wave operator; domes, whose cap must come down to the boundary's hull) either stalls or
 //!   converges by crumpling into mesh-sized pleats (saddle-7700-0.1: 994 edges turning past
-//!   60°, looked at). When the disk is a height field, the cone over its boundary from an
+//!   60°, looked at). The cone over its boundary from an
 //!   apex with cone angle 2π (one always exists: Fenchel's lemma) is flattenable, and the
 //!   run from it converges in 3–28 iterations on every noisy saddle and dome of the corpus
 //!   with no folds, at a relative Hausdorff distance of 11 % (domes) to 18 % (saddles).
@@ -161,10 +161,10 @@ mod cone;
 mod contact;
 mod parts;
 
-pub use cone::{cone_start, fitted_curvature, Curvature, NoCone};
+pub use cone::{cone_start, fitted_curvature, isoperimetric_excess, Curvature, NoCone};
 pub use contact::{Keep, Obstacle};
 
-use super::{AlgoError, Control, Outcome, Progress};
+use super::{AlgoError, Control, Outcome, Progress, Renamed};
 use crate::geometry::{corner_angle, corner_angle_gradient};
 use crate::linalg::{LdltSolver, LinalgError, LuSolver};
 use crate::mesh::{cross, dot, sub, Mesh, RawMesh, VertexKind, NONE};
@@ -941,6 +941,7 @@ pub fn solve_clear_of(
         && params.until == Until::Flattenable;
     let mut spent = 0;
     let mut tried: Option<Report> = None;
+    let mut spare: Option<Spare> = None;
     // `first` leaves one iteration for the input's run, and an input that is flattenable
     // already to that run (which returns it unchanged). `auto` gives the cone a third of the
     // budget: where it fired the cone's run converged in 12–26 iterations (corpus), and
@@ -972,6 +973,14 @@ pub fn solve_clear_of(
             }
             ConeRun::Rejected(why, report) => {
                 spent = report.iterations;
+                tried = Some(Report {
+                    stop_reason: why,
+                    ..report
+                });
+            }
+            ConeRun::Unconverged(why, report, out) => {
+                spent = report.iterations;
+                spare = Some((out, report.clone(), 0));
                 tried = Some(Report {
                     stop_reason: why,
                     ..report
@@ -1013,12 +1022,17 @@ pub fn solve_clear_of(
                     first.stop_reason = format!("{}; developable cone: {why}", first.stop_reason);
                     absorb(&mut first, &second);
                 }
+                ConeRun::Unconverged(why, second, out2) => {
+                    first.stop_reason = format!("{}; developable cone: {why}", first.stop_reason);
+                    spare = Some((out2, second.clone(), first.iterations));
+                    absorb(&mut first, &second);
+                }
             }
         }
     }
     let remaining = params.max_iterations.saturating_sub(first.iterations);
     if params.shape_penalty == 0.0 || remaining == 0 {
-        return Ok((out, first));
+        return Ok(prefer_spare(out, first, spare));
     }
     let plain = Params {
         shape_penalty: 0.0,
@@ -1038,7 +1052,7 @@ pub fn solve_clear_of(
             first.stop_reason, second.max_flattenability, second.stop_reason
         );
         absorb(&mut first, &second);
-        Ok((out, first))
+        Ok(prefer_spare(out, first, spare))
     }
 }
 
@@ -1079,7 +1093,7 @@ fn uncrumple(
             );
             Ok((out, first))
         }
-        ConeRun::Rejected(why, second) => {
+        ConeRun::Rejected(why, second) | ConeRun::Unconverged(why, second, _) => {
             absorb(&mut first, &second);
             first.stop_reason = format!(
                 "{} ({new} new creases past 60°; developable cone: {why})",
@@ -1162,6 +1176,43 @@ enum ConeRun {
     Accepted(Mesh, Report),
     /// Why not (no cone, or the run's outcome), and the iterations it took.
     Rejected(String, Report),
+    /// It did not converge but kept the shape (no more folds, no corner below the floor):
+    /// its result, kept in case nothing later gets ϖ_max lower.
+    Unconverged(String, Report, Mesh),
+}
+
+/// The best unconverged result of a cone run: its mesh, its report, and the iterations run
+/// before it (so that its `best_iteration` counts from the start).
+type Spare = (Mesh, Report, usize);
+
+/// `(out, report)`, or the cone run's `spare` when its ϖ_max is lower ("never worse": the
+/// merit is ϖ_max first). The report keeps the whole run's iterations and history.
+fn prefer_spare(out: Mesh, report: Report, spare: Option<Spare>) -> (Mesh, Report) {
+    match spare {
+        Some((mesh, s, offset)) if s.max_flattenability < report.max_flattenability => {
+            let stop_reason = format!(
+                "{}; kept the developable cone's result, the lowest ϖ_max reached ({:.2e})",
+                report.stop_reason, s.max_flattenability
+            );
+            let best_iteration = match s.best_iteration {
+                0 => 0,
+                b => offset + b,
+            };
+            let report = Report {
+                best_iteration,
+                converged: false,
+                stop_reason,
+                refined: s.refined,
+                stuck_vertices: s.stuck_vertices,
+                max_flattenability: s.max_flattenability,
+                stationarity: s.stationarity,
+                free_vertices: s.free_vertices,
+                ..report
+            };
+            (mesh, report)
+        }
+        _ => (out, report),
+    }
 }
 
 /// A run from the developable cone over the boundary (the `cone` module) with at most
@@ -1187,7 +1238,8 @@ fn from_cone(
         ..params.clone()
     };
     // Stopped (cancel or time limit) during this optional stage: keep what came before.
-    let (out, report) = match solve_phase(&start, &p, None, &Renamed(control, "from the cone")) {
+    let (out, mut report) = match solve_phase(&start, &p, None, &Renamed(control, "from the cone"))
+    {
         Err(AlgoError::Cancelled) => {
             return Ok(ConeRun::Rejected(
                 "stopped, cancelled or out of time".into(),
@@ -1201,14 +1253,27 @@ fn from_cone(
             .into_iter()
             .fold(PI, f64::min)
     };
+    // Why the cone, so far from the input, may be the only way: a proof, not a stall.
+    if let Some(excess) = isoperimetric_excess(mesh).filter(|&e| e > 1.0) {
+        report.stop_reason = format!(
+            "{} (the input's area is {excess:.1}× P²/4π, the most any flattenable disk with \
+             its boundary can have, by the isoperimetric inequality of flat disks: none stays \
+             near it; cut it, e.g. with `segment`, to keep its shape)",
+            report.stop_reason
+        );
+    }
     let folds_in = crate::geometry::fold_edges(mesh).len();
     let folds_out = crate::geometry::fold_edges(&out).len();
     let floor = smallest(mesh).min(params.min_angle.to_radians());
     let why = if !report.converged {
-        format!(
+        let why = format!(
             "not flattenable from it (ϖ_max {:.2e}: {})",
             report.max_flattenability, report.stop_reason
-        )
+        );
+        if folds_out <= folds_in && smallest(&out) >= floor {
+            return Ok(ConeRun::Unconverged(why, report, out));
+        }
+        why
     } else if folds_out > folds_in {
         format!("flattenable from it, but with {folds_out} folds (input {folds_in})")
     } else if smallest(&out) < floor {
@@ -1221,25 +1286,6 @@ fn from_cone(
         return Ok(ConeRun::Accepted(out, report));
     };
     Ok(ConeRun::Rejected(why, report))
-}
-
-/// Progress of a later run of [`solve`] under its own stage names (`newton, no shape
-/// penalty`, …), so that a client sees its iterations restart with a new stage.
-struct Renamed<'a>(&'a dyn Control, &'static str);
-
-impl Control for Renamed<'_> {
-    fn progress(&self, p: &Progress) {
-        self.0.progress(&Progress {
-            stage: format!("{}, {}", p.stage, self.1),
-            ..p.clone()
-        });
-    }
-    fn cancelled(&self) -> bool {
-        self.0.cancelled()
-    }
-    fn cancelled_before(&self, seconds: f64) -> bool {
-        self.0.cancelled_before(seconds)
-    }
 }
 
 /// One run of the solver with fixed parameters (see [`solve`]).

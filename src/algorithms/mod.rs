@@ -47,6 +47,25 @@ pub trait Control: Sync {
     }
 }
 
+/// Progress of a later run under its own stage names (`newton, no shape penalty`, …), so
+/// that a client sees its iterations restart with a new stage.
+pub(crate) struct Renamed<'a>(pub &'a dyn Control, pub &'static str);
+
+impl Control for Renamed<'_> {
+    fn progress(&self, p: &Progress) {
+        self.0.progress(&Progress {
+            stage: format!("{}, {}", p.stage, self.1),
+            ..p.clone()
+        });
+    }
+    fn cancelled(&self) -> bool {
+        self.0.cancelled()
+    }
+    fn cancelled_before(&self, seconds: f64) -> bool {
+        self.0.cancelled_before(seconds)
+    }
+}
+
 /// A [`Control`] that ignores progress and can be cancelled through a flag.
 #[derive(Debug, Default)]
 pub struct Silent {
