@@ -4,7 +4,8 @@
 //!
 //! - `method = "global"` (default): min E = Σ_e (l_e − l⁰_e)² subject to θ = 2π at every
 //!   interior vertex (Eq. 8). `solver = "sqp"` (default, beyond the paper; `sqp.rs`) solves it
-//!   exactly to g_max ≤ 1e-6; `solver = "penalty_cg"` is the paper's penalty J = E + (ρ/2)G²
+//!   exactly to g_max ≤ 1e-6, with a feasibility restoration by fl-mesh when it stalls
+//!   ([`restore`]); `solver = "penalty_cg"` is the paper's penalty J = E + (ρ/2)G²
 //!   with its ρ schedule and 5 CG steps per ρ (`cg.rs`).
 //! - `method = "local"`: the paper's heap-driven moves along fixed normals within ±δ_T
 //!   (Sec. 5, `local.rs`).
@@ -101,6 +102,10 @@ pub struct Params {
     pub step_tolerance: f64,
     /// `sqp`: iterations without g_max halving that end an unflattenable run.
     pub stall_iterations: usize,
+    /// `sqp`: when the run stalls unflattenable (not when `max_iterations` ends it), restore
+    /// feasibility with `fl-mesh` from the input (boundary fixed, no refinement), then run
+    /// again from its result.
+    pub restore: bool,
     /// `local`: largest offset δ_T along a normal, mesh units; none: the mean edge length L̄.
     pub delta_t: Option<f64>,
     /// `local`: most heap pops (N_max).
@@ -129,6 +134,7 @@ impl Default for Params {
             smoothness: 10.0,
             step_tolerance: 1e-4,
             stall_iterations: 40,
+            restore: true,
             delta_t: None,
             max_moves: 500_000,
             update: Update::GaussNewton,
@@ -489,7 +495,25 @@ pub fn run(
         .collect();
     let run = match (params.method, params.solver) {
         (Method::Local, _) => local::run(&model, start.positions(), params, control)?,
-        (_, Solver::Sqp) => sqp::run(&model, start.positions(), &movable, params, control)?,
+        (_, Solver::Sqp) => {
+            let first = sqp::run(
+                &model,
+                start.positions(),
+                start.positions(),
+                &movable,
+                params,
+                control,
+            )?;
+            // Only a stall: a run cut short by `max_iterations` was given its budget.
+            if first.g_max <= params.tolerance()
+                || !params.restore
+                || first.stop == Stop::MaxIterations
+            {
+                first
+            } else {
+                restore(&model, &start, first, &movable, params, control)?
+            }
+        }
         (_, Solver::PenaltyCg) => cg::run(&model, start.positions(), &movable, params, control)?,
     };
     let out = start
@@ -501,6 +525,103 @@ pub fn run(
         patterns: None,
         summary,
         levels,
+    })
+}
+
+/// The feasibility restoration after an `sqp` run that stalled unflattenable (beyond the
+/// paper; the issue's "feasibility-restoration phase"): fl-mesh, whose globalisation
+/// (non-monotone steps, retries, the developable cone) reaches θ = 2π where the SQP's
+/// monotone Levenberg–Marquardt steps stall with every vertex at a similar g, is run from
+/// the input with the boundary fixed and without refinement (the vertex set must stay E's);
+/// from its flattenable result the SQP runs again, now in its objective phase,
+/// lowering E + closeness along the constraints with v⁰ still the input. Any constraint point
+/// is as good a start as another for Eq. 8, so this changes where the SQP ends, not what it
+/// solves. From the input, not from the SQP's best iterate: that one is crumpled where the
+/// SQP stalled (mh_shoes01: 128 folds, a corner of 0.002°), and fl-mesh from it stalled at
+/// 8.8e-4 where from the input it converges. When fl-mesh does not converge either, the
+/// first run is returned and the detail says so.
+fn restore(
+    model: &Model<'_>,
+    start: &Mesh,
+    first: Run,
+    movable: &[bool],
+    params: &Params,
+    control: &dyn Control,
+) -> Result<Run, AlgoError> {
+    use super::fl_mesh;
+    let tol = params.tolerance();
+    let fl = fl_mesh::Params {
+        refine: false,
+        tolerance: tol,
+        ..fl_mesh::Params::default()
+    };
+    let said = |first: &Run| {
+        if first.stop_detail.is_empty() {
+            first.stop.as_str().to_string()
+        } else {
+            first.stop_detail.clone()
+        }
+    };
+    let restoration = super::Renamed(control, "restoration");
+    let (flat, report) = match fl_mesh::solve(start, &fl, &restoration) {
+        Ok(done) => done,
+        Err(AlgoError::Cancelled) => return Err(AlgoError::Cancelled),
+        Err(e) => {
+            let stop_detail = format!("{}; fl-mesh restoration failed: {e}", said(&first));
+            return Ok(Run {
+                stop_detail,
+                ..first
+            });
+        }
+    };
+    if !report.converged {
+        let stop_detail = format!(
+            "{}; fl-mesh restoration from the input did not reach the tolerance either \
+             (ϖ_max {:.2e}: {})",
+            said(&first),
+            report.max_flattenability,
+            report.stop_reason
+        );
+        return Ok(Run {
+            stop_detail,
+            ..first
+        });
+    }
+    let second = sqp::run(
+        model,
+        start.positions(),
+        flat.positions(),
+        movable,
+        params,
+        &super::Renamed(control, "after restoration"),
+    )?;
+    let offset = first.iterations;
+    let mut history = first.history;
+    history.extend(second.history.iter().map(|h| HistoryEntry {
+        iteration: h.iteration + offset,
+        ..*h
+    }));
+    let stop_detail = format!(
+        "sqp: {} at g_max {:.2e}; fl-mesh restoration from the input (boundary fixed, no refinement): \
+         flattenable in {} iterations; sqp from there: {}",
+        first.stop.as_str(),
+        first.g_max,
+        report.iterations,
+        if second.stop_detail.is_empty() {
+            second.stop.as_str()
+        } else {
+            &second.stop_detail
+        }
+    );
+    Ok(Run {
+        iterations: offset + second.iterations,
+        inner: first.inner + second.inner,
+        evaluations: first.evaluations + second.evaluations,
+        best_iteration: offset + second.best_iteration,
+        stop_detail,
+        history,
+        g_max_input: first.g_max_input,
+        ..second
     })
 }
 

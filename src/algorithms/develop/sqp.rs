@@ -85,18 +85,22 @@ const MIN_WEIGHT: f64 = 1e-3;
 const MAX_CORRECTIONS: usize = 4;
 
 /// Run the SQP from the input positions `v0` (also the closeness anchor).
+/// Eq. 8 from `start` (the input v0, or a flattenable point found by a restoration phase),
+/// with the closeness and smoothness terms measured from v0. A flattenable v0 is returned
+/// as it is; a flattenable start other than v0 is where the objective phase begins.
 pub(super) fn run(
     model: &Model<'_>,
     v0: &[[f64; 3]],
+    start: &[[f64; 3]],
     movable: &[bool],
     params: &Params,
     control: &dyn Control,
 ) -> Result<Run, AlgoError> {
     let tol = params.tolerance();
     let mut g = vec![0.0; v0.len()];
-    model.g(v0, &mut g);
-    let mut run = Run::new(v0, g_max(&g));
-    if run.g_max <= tol {
+    model.g(start, &mut g);
+    let mut run = Run::new(start, g_max(&g));
+    if run.g_max <= tol && start == v0 {
         run.stop = Stop::Tolerance;
         return Ok(run);
     }
@@ -134,18 +138,19 @@ pub(super) fn run(
         (model.e(pos) + mu * c + kappa * k) / (h * h)
     };
     let sq = |g: &[f64]| cons.iter().map(|&v| g[v as usize].powi(2)).sum::<f64>();
-    let mut pos = v0.to_vec();
-    let mut trial = v0.to_vec();
+    let mut pos = start.to_vec();
+    let mut trial = start.to_vec();
     let mut trial_g = g.clone();
     let mut grad_e = vec![[0.0; 3]; v0.len()];
     let mut lin = vec![0.0; cons.len()];
     let mut lin_t = vec![0.0; cons.len()];
-    let mut trial2 = v0.to_vec();
+    let mut trial2 = start.to_vec();
     let mut trial_g2 = g.clone();
     let mut f = f_of(&pos, kappa);
     let (mut damping, mut growth) = (DAMPING_START, 2.0);
     let mut weight = 1.0f64;
-    let mut best_f = f64::INFINITY;
+    // A flattenable start is the best so far until a flattenable iterate lowers f.
+    let mut best_f = if run.g_max <= tol { f } else { f64::INFINITY };
     let mut since_halving = 0;
     let mut stall_ref = run.g_max;
     let m3 = 3 * kkt.m;
