@@ -51,7 +51,8 @@
 //!   keep every corner above 10° (t-shirt: 0.07°). It needs the longer stall window (40) and
 //!   iteration budget (600), since resisting a crease slows ϖ_max's fall. When the penalised
 //!   run does not converge, [`solve`] runs the paper's model from the input with the rest of
-//!   the budget and keeps its result if it converged.
+//!   the budget and keeps its result if it converged, or if it got ϖ_max lowest without new
+//!   folds or corners below the floor.
 //! - Step radius (`step_radius`, merit rule, default 0.5 mean edge lengths; 0 = the full step
 //!   however long, as before). Near flat caps ∂θ is small, so the least-norm normal step that
 //!   the linearisation asks for grows to several edge lengths (5–7 h̄ on dome-7700-0.01 when it
@@ -126,7 +127,9 @@
 //!   result it then replaces if it creases less: the issue puts "never crumple it" before
 //!   closeness, and a crumpled sheet is no shape to sew. `first` runs it before the input's;
 //!   `never` not at all. Its result is kept only if flattenable with no new folds and no
-//!   corner below min(`min_angle`, the input's smallest). Not with an obstacle, nor with
+//!   corner below min(`min_angle`, the input's smallest), or, unconverged, if it keeps those
+//!   and no other run's result has a lower ϖ_max (likewise the paper's model's run below:
+//!   "never worse" by ϖ_max first). Not with an obstacle, nor with
 //!   `until = stationary` (from the cone those iterations drift back towards the input and
 //!   lose flattenability: saddle-7700-0.01 7.5e-4, dome-7700-0.1 0.11). Measured on
 //!   the 62-case corpus (issue 12 note): converged 43 → 49, converged without new folds
@@ -980,7 +983,7 @@ pub fn solve_clear_of(
             }
             ConeRun::Unconverged(why, report, out) => {
                 spent = report.iterations;
-                spare = Some((out, report.clone(), 0));
+                spare = Some((out, report.clone(), 0, "the developable cone's"));
                 tried = Some(Report {
                     stop_reason: why,
                     ..report
@@ -1024,7 +1027,12 @@ pub fn solve_clear_of(
                 }
                 ConeRun::Unconverged(why, second, out2) => {
                     first.stop_reason = format!("{}; developable cone: {why}", first.stop_reason);
-                    spare = Some((out2, second.clone(), first.iterations));
+                    spare = Some((
+                        out2,
+                        second.clone(),
+                        first.iterations,
+                        "the developable cone's",
+                    ));
                     absorb(&mut first, &second);
                 }
             }
@@ -1051,7 +1059,14 @@ pub fn solve_clear_of(
              (ϖ_max {:.2e}: {})",
             first.stop_reason, second.max_flattenability, second.stop_reason
         );
+        let offset = first.iterations;
         absorb(&mut first, &second);
+        let lowest = spare
+            .as_ref()
+            .map_or(f64::INFINITY, |s| s.1.max_flattenability);
+        if second.max_flattenability < lowest && keeps_shape(mesh, &out2, params) {
+            spare = Some((out2, second, offset, "the paper's model's"));
+        }
         Ok(prefer_spare(out, first, spare))
     }
 }
@@ -1181,17 +1196,18 @@ enum ConeRun {
     Unconverged(String, Report, Mesh),
 }
 
-/// The best unconverged result of a cone run: its mesh, its report, and the iterations run
-/// before it (so that its `best_iteration` counts from the start).
-type Spare = (Mesh, Report, usize);
+/// An unconverged result of a later run that kept the shape (the cone's, the paper's
+/// model's): its mesh, its report, the iterations run before it (so that its
+/// `best_iteration` counts from the start) and whose it is.
+type Spare = (Mesh, Report, usize, &'static str);
 
-/// `(out, report)`, or the cone run's `spare` when its ϖ_max is lower ("never worse": the
-/// merit is ϖ_max first). The report keeps the whole run's iterations and history.
+/// `(out, report)`, or the `spare` when its ϖ_max is lower ("never worse": the merit is
+/// ϖ_max first). The report keeps the whole run's iterations and history.
 fn prefer_spare(out: Mesh, report: Report, spare: Option<Spare>) -> (Mesh, Report) {
     match spare {
-        Some((mesh, s, offset)) if s.max_flattenability < report.max_flattenability => {
+        Some((mesh, s, offset, whose)) if s.max_flattenability < report.max_flattenability => {
             let stop_reason = format!(
-                "{}; kept the developable cone's result, the lowest ϖ_max reached ({:.2e})",
+                "{}; kept {whose} result, the lowest ϖ_max reached ({:.2e})",
                 report.stop_reason, s.max_flattenability
             );
             let best_iteration = match s.best_iteration {
@@ -1213,6 +1229,21 @@ fn prefer_spare(out: Mesh, report: Report, spare: Option<Spare>) -> (Mesh, Repor
         }
         _ => (out, report),
     }
+}
+
+/// The smallest corner angle of a mesh (π when it has none).
+fn smallest(m: &Mesh) -> f64 {
+    crate::geometry::min_corner_angles(m)
+        .into_iter()
+        .fold(PI, f64::min)
+}
+
+/// Whether `out` has no more folds than `input` and no corner below min(`min_angle`, the
+/// input's smallest): what a later run's result must keep to be taken.
+fn keeps_shape(input: &Mesh, out: &Mesh, params: &Params) -> bool {
+    let floor = smallest(input).min(params.min_angle.to_radians());
+    crate::geometry::fold_edges(out).len() <= crate::geometry::fold_edges(input).len()
+        && smallest(out) >= floor
 }
 
 /// A run from the developable cone over the boundary (the `cone` module) with at most
@@ -1248,11 +1279,6 @@ fn from_cone(
         }
         other => other?,
     };
-    let smallest = |m: &Mesh| {
-        crate::geometry::min_corner_angles(m)
-            .into_iter()
-            .fold(PI, f64::min)
-    };
     // Why the cone, so far from the input, may be the only way: a proof, not a stall.
     if let Some(excess) = isoperimetric_excess(mesh).filter(|&e| e > 1.0) {
         report.stop_reason = format!(
@@ -1270,7 +1296,7 @@ fn from_cone(
             "not flattenable from it (ϖ_max {:.2e}: {})",
             report.max_flattenability, report.stop_reason
         );
-        if folds_out <= folds_in && smallest(&out) >= floor {
+        if keeps_shape(mesh, &out, params) {
             return Ok(ConeRun::Unconverged(why, report, out));
         }
         why
