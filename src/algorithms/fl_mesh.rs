@@ -135,8 +135,9 @@
 //!   the 62-case corpus (issue 12 note): converged 43 → 49, converged without new folds
 //!   38 → 44 (every saddle and dome), and the crumpled saddles (fixture-saddle,
 //!   saddle-2000-*, saddle-7700-0.1: 44–989 new creases) come back smooth (≤ 10 creases)
-//!   at 16–18 % instead of 2–5 % of the diagonal. No real mesh of ../shared qualifies (none
-//!   is a height-field disk), so their results are unchanged. Criterion medians, noisy
+//!   at 16–18 % instead of 2–5 % of the diagonal. No real mesh of ../shared is a height-field
+//!   disk; the disks that are not (mh_shoes01's uppers, bff_face) get the cone through a
+//!   harmonic layout (the `cone` module): the shoe's uppers converge from it (issue 12 note). Criterion medians, noisy
 //!   saddles (0.01), defaults (`auto`, the cone first): 7.7k faces 0.44 s (14 iterations),
 //!   45k faces 5.2 s (20); with `fallback`, which reaches the cone only after the input's
 //!   run stalls, 5.1 s (181) at 7.7k. The noisy domes of 7.7k and 45k faces, which `auto`
