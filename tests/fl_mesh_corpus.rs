@@ -441,6 +441,34 @@ fn a_pouch_ends_flattenable_on_the_cone_over_its_opening() {
     );
 }
 
+/// "Never worse" across runs: with the cone first and a budget too small for any run to
+/// converge, the cone's unconverged result, far lower in ϖ_max than what the input's one
+/// remaining iteration reaches, is what comes back, and the report describes that mesh
+/// (ϖ_max and stuck vertices checked against the output's angles by `check_never_worse`).
+#[test]
+fn an_unconverged_cone_run_is_kept_when_it_reached_the_lowest_varpi() {
+    let mesh = corpus::pouch(16);
+    let params = Params {
+        cone_start: fl_mesh::ConeStart::First,
+        max_iterations: 3,
+        refine: false,
+        retry: false,
+        ..Params::default()
+    };
+    let (w_in, w_out, converged) = check_never_worse("pouch-16-short", &mesh, &params);
+    assert!(!converged);
+    let (_, r) = fl_mesh::solve(&mesh, &params, &Silent::default()).expect("runs");
+    assert!(
+        r.stop_reason
+            .contains("kept the developable cone's result, the lowest ϖ_max reached"),
+        "{}",
+        r.stop_reason
+    );
+    // The input's own run had one iteration: the cone's result is far lower.
+    assert!(w_out < 0.1 * w_in, "{w_in:e} -> {w_out:e}");
+    assert!(r.best_iteration <= r.iterations && r.history.len() == r.iterations);
+}
+
 /// With `fallback`, a noisy saddle that the run from the input makes flattenable only by
 /// crumpling it (hundreds of edges turning past 60°) is handed to the developable cone, whose
 /// result is smooth: flattenable, no new fold, and creases on under 1 % of the edges.

@@ -290,8 +290,8 @@ pub struct Params {
     /// Merit rule: the longest normal step tried, in mean edge lengths (a full step that asks
     /// for more is scaled down to it); 0 tries the full step however long.
     pub step_radius: f64,
-    /// `fallback` (default), `first` or `never`: when a disk that is a height field is
-    /// started from the developable cone over its boundary (see the module doc).
+    /// `auto` (default), `fallback`, `first` or `never`: when a disk is started from the
+    /// developable cone over its boundary (see the module doc and the `cone` module).
     pub cone_start: ConeStart,
     /// A run that stalled (ended unconverged before `max_iterations`) is retried: its parts
     /// alone, then from the best result, each run with its own `max_iterations` (see
@@ -1010,7 +1010,7 @@ pub fn solve_clear_of(
         if first.converged && cone_allowed && cone_after {
             return uncrumple(mesh, params, out, first, control);
         }
-        return Ok((out, first));
+        return Ok(prefer_spare(out, first, spare));
     }
     if cone_allowed && cone_after {
         let remaining = params.max_iterations.saturating_sub(first.iterations);

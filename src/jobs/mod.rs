@@ -173,7 +173,7 @@ impl Kind {
                  and loop: 200), fix_boundary=true|false (global and loop: false), closeness \
                  (sqp: 1e-2), smoothness (sqp: 10, lowered to 0 once flattenable), step_tolerance (sqp: 1e-4), stall_iterations (sqp: 40), restore=true|false (sqp: true; \
                  an unflattenable stall is followed by fl-mesh from the input, boundary fixed, \
-                 and the SQP again from its result), eta \
+                 and the SQP again from its result, with max_iterations of its own), eta \
                  (penalty_cg: 1e-4), cg_steps (penalty_cg: 5), delta_t (local: the mean edge \
                  length), max_moves (local: 500000), update=gauss_newton|newton (local: \
                  gauss_newton), relaxation (local gauss_newton: 1.8), levels (loop: 1)"

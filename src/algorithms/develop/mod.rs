@@ -536,7 +536,9 @@ pub fn run(
 /// from its flattenable result the SQP runs again, now in its objective phase,
 /// lowering E + closeness along the constraints with v⁰ still the input. Any constraint point
 /// is as good a start as another for Eq. 8, so this changes where the SQP ends, not what it
-/// solves. From the input, not from the SQP's best iterate: that one is crumpled where the
+/// solves. `iterations` and `history` count both SQP runs (fl-mesh's own iterations are in
+/// the detail); `best_iteration` is the first run's count when the restoration's result
+/// itself is returned. From the input, not from the SQP's best iterate: that one is crumpled where the
 /// SQP stalled (mh_shoes01: 128 folds, a corner of 0.002°), and fl-mesh from it stalled at
 /// 8.8e-4 where from the input it converges. When fl-mesh does not converge either, the
 /// first run is returned and the detail says so.
@@ -587,6 +589,16 @@ fn restore(
             ..first
         });
     }
+    if flat.num_vertices() != start.num_vertices() {
+        let stop_detail = format!(
+            "{}; fl-mesh restoration changed the vertex set (internal error), not used",
+            said(&first)
+        );
+        return Ok(Run {
+            stop_detail,
+            ..first
+        });
+    }
     let second = sqp::run(
         model,
         start.positions(),
@@ -595,6 +607,20 @@ fn restore(
         params,
         &super::Renamed(control, "after restoration"),
     )?;
+    // Never worse: fl-mesh's ϖ and E's g are measured by different code, so a start at the
+    // tolerance could come back above it.
+    if second.g_max > tol && second.g_max >= first.g_max {
+        let stop_detail = format!(
+            "{}; the run from fl-mesh's restoration ended no lower (g_max {:.2e}), not used",
+            said(&first),
+            second.g_max
+        );
+        return Ok(Run {
+            stop_detail,
+            ..first
+        });
+    }
+    let first_said = said(&first);
     let offset = first.iterations;
     let mut history = first.history;
     history.extend(second.history.iter().map(|h| HistoryEntry {
@@ -602,9 +628,9 @@ fn restore(
         ..*h
     }));
     let stop_detail = format!(
-        "sqp: {} at g_max {:.2e}; fl-mesh restoration from the input (boundary fixed, no refinement): \
-         flattenable in {} iterations; sqp from there: {}",
-        first.stop.as_str(),
+        "sqp: {} at g_max {:.2e}; fl-mesh restoration from the input (boundary fixed, no \
+         refinement): flattenable in {} iterations; sqp from there: {}",
+        first_said,
         first.g_max,
         report.iterations,
         if second.stop_detail.is_empty() {

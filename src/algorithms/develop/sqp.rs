@@ -84,7 +84,6 @@ const MIN_WEIGHT: f64 = 1e-3;
 /// Most corrections after an accepted step (each one solve with the same factorisation).
 const MAX_CORRECTIONS: usize = 4;
 
-/// Run the SQP from the input positions `v0` (also the closeness anchor).
 /// Eq. 8 from `start` (the input v0, or a flattenable point found by a restoration phase),
 /// with the closeness and smoothness terms measured from v0. A flattenable v0 is returned
 /// as it is; a flattenable start other than v0 is where the objective phase begins.

@@ -28,10 +28,12 @@
 //!
 //! A disk that is no height field (a pouch, a shoe's upper, a cap that folds over) has no
 //! projection to keep. Its plane is that of its boundary's vector area, and its layout the
-//! cotangent-harmonic map into the unit disk (boundary by arc length; convex, so it folds only
-//! where a cotangent weight is negative, which is refused), carried onto the boundary's
-//! projection ray by ray from each candidate apex (one-to-one since that polygon is
-//! star-shaped from it). Such a disk often holds more area than any flat disk with its
+//! cotangent-harmonic map into the boundary's projection on it, or, where that map folds (a
+//! non-convex projection), the one into the unit disk (boundary by arc length; convex, so it
+//! folds only where a cotangent weight is negative, which is refused), carried onto the
+//! boundary's projection ray by ray from each candidate apex (one-to-one as a continuous map
+//! since that polygon is star-shaped from it; an apex whose mapped triangles turn over is
+//! refused). Such a disk often holds more area than any flat disk with its
 //! boundary can ([`isoperimetric_excess`]); then nothing near it is flattenable and the cone
 //! is the honest answer. Measured: mh_shoes01's uppers (10.9 times the bound), which stalled
 //! from the input at 8e-3 in every strategy tried, end flattenable from the cone with no
@@ -115,7 +117,8 @@ pub enum NoCone {
     NotAHeightField,
     /// From no candidate apex is the boundary star-shaped with a 2π cone point.
     NoApex,
-    /// Not a height field, and its harmonic map into the boundary's projection folds.
+    /// Not a height field, and no harmonic layout: the boundary encloses no area on its own
+    /// plane, or the maps into its projection and into the unit disk both fold (or fail).
     NoEmbedding,
 }
 
@@ -128,8 +131,8 @@ impl std::fmt::Display for NoCone {
             }
             NoCone::NoApex => "no apex with a 2π cone angle sees the whole boundary",
             NoCone::NoEmbedding => {
-                "the patch is no height field, and its harmonic map into its boundary's \
-                 projection folds"
+                "the patch is no height field, and neither harmonic map (into its boundary's \
+                 projection, into the unit disk) lays it out without folding"
             }
         })
     }
@@ -357,7 +360,8 @@ impl Layout {
     /// boundary is star-shaped): a point at radius ρ and angle ψ of the disk goes to
     /// q + ρ (P(ψ) − q), P(ψ) the boundary polygon's point at ψ (linear between the
     /// boundary points' angles), so rays from the disk's centre map to rays from q and the
-    /// whole map is one-to-one.
+    /// continuous map is one-to-one (the triangles between the mapped vertices can still
+    /// turn over near a reflex corner: [`start_and_apex`] refuses such an apex).
     fn flat(&self, q: [f64; 2]) -> std::borrow::Cow<'_, [[f64; 2]]> {
         let (uv, ring, angles) = match self {
             Layout::Projected(flat) => return std::borrow::Cow::Borrowed(flat),
@@ -430,23 +434,27 @@ fn layout(mesh: &Mesh) -> Result<(Frame, Layout), NoCone> {
         run += l;
     }
     let (pos, tris) = (mesh.positions(), mesh.triangles());
-    let mut on_boundary = vec![false; pos.len()];
+    // Unreferenced vertices are held too (at the origin): left free, their empty rows
+    // would make the system singular.
+    let mut on_boundary: Vec<bool> = conn
+        .kinds()
+        .iter()
+        .map(|k| *k == VertexKind::Unreferenced)
+        .collect();
     for &v in loop_ {
         on_boundary[v as usize] = true;
     }
     let mut system = CotanSystem::new(pos, tris, &on_boundary).map_err(|_| NoCone::NoEmbedding)?;
     let mut harmonic = |at: &dyn Fn(usize) -> [f64; 2]| -> Option<Vec<[f64; 2]>> {
-        let mut fixed: Vec<Option<[f64; 2]>> = vec![None; pos.len()];
+        let mut fixed: Vec<Option<[f64; 2]>> = on_boundary
+            .iter()
+            .map(|&b| b.then_some([0.0, 0.0]))
+            .collect();
         for (i, &v) in loop_.iter().enumerate() {
             fixed[v as usize] = Some(at(i));
         }
         let uv = system.fill(pos, tris, &fixed, 0).ok()?;
-        let folds = tris.iter().any(|t| {
-            let [a, b, c] = t.map(|v| uv[v as usize]);
-            let turn = cross2(sub2(b, a), sub2(c, a));
-            turn.is_nan() || turn <= 0.0
-        });
-        (!folds).then(|| interior.iter().map(|&v| uv[v as usize]).collect())
+        (!folds_in_plane(tris, &uv)).then(|| interior.iter().map(|&v| uv[v as usize]).collect())
     };
     // Into the boundary's projection itself when that map does not fold (it stays close to
     // the projection where the patch nearly is a height field: bff_face's cone run reached
@@ -472,6 +480,9 @@ fn start_and_apex(mesh: &Mesh) -> Result<(Mesh, [f64; 3]), NoCone> {
         let mut pos = mesh.positions().to_vec();
         let polar = fan.polar_angles(apex.q);
         let flat = layout.flat(apex.q);
+        if matches!(layout, Layout::Disk { .. }) && turns_over(mesh, &frame, &interior, &flat) {
+            return None;
+        }
         for (&v, &q) in interior.iter().zip(flat.iter()) {
             pos[v as usize] = frame.lift(q, fan.height(apex, &polar, q)?);
         }
@@ -521,6 +532,25 @@ fn start_and_apex(mesh: &Mesh) -> Result<(Mesh, [f64; 3]), NoCone> {
     let pos = place(apex).ok_or(NoCone::NoApex)?;
     let start = mesh.with_positions(pos).map_err(|_| NoCone::NoApex)?;
     Ok((start, frame.lift(apex.q, apex.h)))
+}
+
+/// Whether a triangle turns over (or degenerates) in the plane when the interior vertices are
+/// at `flat` (in `interior` order) and the boundary at its projection.
+fn turns_over(mesh: &Mesh, frame: &Frame, interior: &[u32], flat: &[[f64; 2]]) -> bool {
+    let mut at: Vec<[f64; 2]> = mesh.positions().iter().map(|&p| frame.plane(p)).collect();
+    for (&v, &q) in interior.iter().zip(flat) {
+        at[v as usize] = q;
+    }
+    folds_in_plane(mesh.triangles(), &at)
+}
+
+/// Whether a triangle turns clockwise (or degenerates) at plane positions `at`.
+fn folds_in_plane(tris: &[[u32; 3]], at: &[[f64; 2]]) -> bool {
+    tris.iter().any(|t| {
+        let [a, b, c] = t.map(|v| at[v as usize]);
+        let turn = cross2(sub2(b, a), sub2(c, a));
+        turn.is_nan() || turn <= 0.0
+    })
 }
 
 /// The smallest corner angle of the mesh's triangles at positions `pos`: the largest cosine,
