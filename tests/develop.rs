@@ -784,6 +784,27 @@ fn loop_with_the_papers_penalty_solver_reports_its_table() {
     assert_eq!(t.vertices[1], out.levels[0].num_vertices());
 }
 
+/// A run the restoration made flattenable: g_max ≤ 1e-6 from acos angle sums, `converged`,
+/// the detail naming the restoration, one history row per iteration; its summary and mesh.
+fn flattenable_through_the_restoration(
+    out: flatmesh::algorithms::Outcome<develop::Summary>,
+) -> (develop::Summary, Mesh) {
+    let (s, m) = (out.summary, out.mesh.unwrap());
+    let gmax = g_max_independent(&m);
+    assert!(
+        gmax <= 1e-6 && s.converged,
+        "g_max {gmax}: {}",
+        s.stop_detail
+    );
+    assert!(
+        s.stop_detail.contains("fl-mesh restoration"),
+        "{}",
+        s.stop_detail
+    );
+    assert_eq!(s.history.len(), s.iterations);
+    (s, m)
+}
+
 /// mh_shoes01 (Wang–Tang's example II is a shoe upper). The SQP alone (`restore = false`) is
 /// never worse than the input, and either flattenable (recomputed) or names its stuck
 /// vertices worst first for a real stop (in 2026-11 it stalls at g_max ≈ 3.5e-2: each upper
@@ -819,20 +840,7 @@ fn sqp_on_a_shoe_is_made_flattenable_by_the_restoration() {
         assert!(!s.stop_detail.contains("restoration"), "{}", s.stop_detail);
     }
     let out = develop::run(&mesh, &Params::default(), &Silent::default()).unwrap();
-    let s = &out.summary;
-    let m = out.mesh.unwrap();
-    let gmax = g_max_independent(&m);
-    assert!(
-        gmax <= 1e-6 && s.converged,
-        "g_max {gmax}: {}",
-        s.stop_detail
-    );
-    assert!(
-        s.stop_detail.contains("fl-mesh restoration"),
-        "{}",
-        s.stop_detail
-    );
-    assert_eq!(s.history.len(), s.iterations);
+    let (s, m) = flattenable_through_the_restoration(out);
     let l0 = lengths(&mesh, mesh.positions());
     let l1 = lengths(&m, m.positions());
     let ds = l0.iter().zip(&l1).map(|(a, b)| (a - b).abs()).sum::<f64>() / l0.iter().sum::<f64>();
@@ -852,19 +860,7 @@ fn a_held_pouch_is_made_flattenable_through_the_restoration() {
         ..Params::default()
     };
     let out = develop::run(&mesh, &p, &Silent::default()).unwrap();
-    let s = &out.summary;
-    let m = out.mesh.unwrap();
-    let gmax = g_max_independent(&m);
-    assert!(
-        gmax <= 1e-6 && s.converged,
-        "g_max {gmax}: {}",
-        s.stop_detail
-    );
-    assert!(
-        s.stop_detail.contains("fl-mesh restoration"),
-        "{}",
-        s.stop_detail
-    );
+    let (_, m) = flattenable_through_the_restoration(out);
     for v in 0..mesh.num_vertices() as u32 {
         if !mesh.conn().is_interior(v) {
             assert_eq!(m.position(v), mesh.position(v), "boundary vertex {v}");
