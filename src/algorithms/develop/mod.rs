@@ -538,10 +538,11 @@ pub fn run(
 /// is as good a start as another for Eq. 8, so this changes where the SQP ends, not what it
 /// solves. `iterations` and `history` count both SQP runs (fl-mesh's own iterations are in
 /// the detail); `best_iteration` is the first run's count when the restoration's result
-/// itself is returned. From the input, not from the SQP's best iterate: that one is crumpled where the
-/// SQP stalled (mh_shoes01: 128 folds, a corner of 0.002°), and fl-mesh from it stalled at
-/// 8.8e-4 where from the input it converges. When fl-mesh does not converge either, the
-/// first run is returned and the detail says so.
+/// itself is returned (mh_shoes01: the SQP from it was stationary at once). From the input,
+/// not from the SQP's best iterate: that one is crumpled where the SQP stalled (mh_shoes01:
+/// 128 folds, a corner of 0.002°), and fl-mesh from it stalled at 8.8e-4 where from the
+/// input it converges. When fl-mesh does not converge either, or the run from its result
+/// ends no lower than the first, the first run is returned and the detail says so.
 fn restore(
     model: &Model<'_>,
     start: &Mesh,
