@@ -98,16 +98,7 @@ impl Procedural {
                 }
             }
         };
-        let (positions, triangles, _) = grid(nu, nv, wrap, f, |_, _| true);
-        let n = triangles.len();
-        let raw = RawMesh {
-            positions,
-            triangles,
-            face_patch: vec![0; n],
-            patch_names: vec![self.family.name().into()],
-            uv: None,
-        };
-        let mesh = Mesh::new(raw).expect("procedural mesh is valid").0;
+        let mesh = grid_mesh(grid(nu, nv, wrap, f, |_, _| true), self.family.name());
         let seed = (self.faces as u64) << 20 ^ (self.noise * 1e6) as u64 ^ self.family as u64;
         with_normal_noise(&mesh, self.noise, seed)
     }
@@ -133,13 +124,17 @@ pub fn pouch(cells: usize) -> Mesh {
             (r2 - 1.0) / (1.0 + r2),
         ]
     };
-    let (positions, triangles, _) = grid(cells, cells, false, f, |_, _| true);
+    grid_mesh(grid(cells, cells, false, f, |_, _| true), "pouch")
+}
+
+/// A generated grid as a mesh of one patch called `name`.
+fn grid_mesh((positions, triangles, _): crate::fixtures::Grid, name: &str) -> Mesh {
     let n = triangles.len();
     let raw = RawMesh {
         positions,
         triangles,
         face_patch: vec![0; n],
-        patch_names: vec!["pouch".into()],
+        patch_names: vec![name.into()],
         uv: None,
     };
     Mesh::new(raw).expect("procedural mesh is valid").0

@@ -603,10 +603,8 @@ fn retry_parts(
                 let retry =
                     wmax(w) > params.tolerance && !impossible_vertices(&part.mesh).contains(&true);
                 retry.then(|| {
-                    let label = InPart {
-                        control,
-                        label: format!("part {} of {total} alone", k + 1),
-                    };
+                    let label =
+                        Renamed::before(control, format!("part {} of {total} alone", k + 1));
                     retry_part(&part.mesh, w, params, &label)
                 })
             })
@@ -761,14 +759,15 @@ fn restart(
     if first.free_vertices == 0 || impossible_vertices(mesh).contains(&true) {
         return Ok((out, first));
     }
-    let (again, second) = match solve_clear_of(&out, params, None, &Renamed(control, "restart")) {
-        Ok(done) => done,
-        // An optional stage stopped (cancel or time limit) or failed: the first run stands.
-        Err(e) => {
-            first.stop_reason = format!("{}; restart: {e}", first.stop_reason);
-            return Ok((out, first));
-        }
-    };
+    let (again, second) =
+        match solve_clear_of(&out, params, None, &Renamed::after(control, "restart")) {
+            Ok(done) => done,
+            // An optional stage stopped (cancel or time limit) or failed: the first run stands.
+            Err(e) => {
+                first.stop_reason = format!("{}; restart: {e}", first.stop_reason);
+                return Ok((out, first));
+            }
+        };
     if second.converged || second.max_flattenability < first.max_flattenability {
         // The restart's numbering extends the first run's (refinement appends).
         let refined = first.refined.clone();
@@ -822,7 +821,7 @@ fn retry_part(
         });
     }
     let start = if a_better { &a } else { whole };
-    let (b, rb) = match solve_clear_of(start, params, None, &Renamed(control, "restart")) {
+    let (b, rb) = match solve_clear_of(start, params, None, &Renamed::after(control, "restart")) {
         Ok(done) => done,
         // Stopped or failed: the first run's result stands.
         Err(e) => {
@@ -905,27 +904,6 @@ fn parts_reason(rows: &[PartReport]) -> String {
         m => format!(", and {m} more"),
     };
     format!("{head}; not: {}{more}", shown.join(", "))
-}
-
-/// Progress of one part's run in [`solve`], its stage prefixed with the part.
-struct InPart<'a> {
-    control: &'a dyn Control,
-    label: String,
-}
-
-impl Control for InPart<'_> {
-    fn progress(&self, p: &Progress) {
-        self.control.progress(&Progress {
-            stage: format!("{}, {}", self.label, p.stage),
-            ..p.clone()
-        });
-    }
-    fn cancelled(&self) -> bool {
-        self.control.cancelled()
-    }
-    fn cancelled_before(&self, seconds: f64) -> bool {
-        self.control.cancelled_before(seconds)
-    }
 }
 
 /// [`solve`], with every free vertex kept at least `keep.clearance` outside `keep.obstacle`
@@ -1048,7 +1026,12 @@ pub fn solve_clear_of(
         max_iterations: remaining,
         ..params.clone()
     };
-    let (out2, second) = solve_phase(mesh, &plain, keep, &Renamed(control, "no shape penalty"))?;
+    let (out2, second) = solve_phase(
+        mesh,
+        &plain,
+        keep,
+        &Renamed::after(control, "no shape penalty"),
+    )?;
     if second.converged {
         let report = chain(first, second, |f, s| {
             format!("with the shape penalty: {f}; without it, from the input: {s}")
@@ -1270,16 +1253,16 @@ fn from_cone(
         ..params.clone()
     };
     // Stopped (cancel or time limit) during this optional stage: keep what came before.
-    let (out, mut report) = match solve_phase(&start, &p, None, &Renamed(control, "from the cone"))
-    {
-        Err(AlgoError::Cancelled) => {
-            return Ok(ConeRun::Rejected(
-                "stopped, cancelled or out of time".into(),
-                Report::default(),
-            ))
-        }
-        other => other?,
-    };
+    let (out, mut report) =
+        match solve_phase(&start, &p, None, &Renamed::after(control, "from the cone")) {
+            Err(AlgoError::Cancelled) => {
+                return Ok(ConeRun::Rejected(
+                    "stopped, cancelled or out of time".into(),
+                    Report::default(),
+                ))
+            }
+            other => other?,
+        };
     // Why the cone, so far from the input, may be the only way: a proof, not a stall.
     if let Some(excess) = isoperimetric_excess(mesh).filter(|&e| e > 1.0) {
         report.stop_reason = format!(

@@ -47,22 +47,48 @@ pub trait Control: Sync {
     }
 }
 
-/// Progress of a later run under its own stage names (`newton, no shape penalty`, …), so
-/// that a client sees its iterations restart with a new stage.
-pub(crate) struct Renamed<'a>(pub &'a dyn Control, pub &'static str);
+/// Progress of a later or partial run under its own stage names (`newton, no shape
+/// penalty`, `part 2 of 5 alone, newton`, …), so that a client sees its iterations restart
+/// with a new stage.
+pub(crate) struct Renamed<'a> {
+    control: &'a dyn Control,
+    label: std::borrow::Cow<'static, str>,
+    before: bool,
+}
+
+impl<'a> Renamed<'a> {
+    /// Stages read "`stage`, `label`".
+    pub(crate) fn after(control: &'a dyn Control, label: &'static str) -> Self {
+        Renamed {
+            control,
+            label: label.into(),
+            before: false,
+        }
+    }
+    /// Stages read "`label`, `stage`".
+    pub(crate) fn before(control: &'a dyn Control, label: String) -> Self {
+        Renamed {
+            control,
+            label: label.into(),
+            before: true,
+        }
+    }
+}
 
 impl Control for Renamed<'_> {
     fn progress(&self, p: &Progress) {
-        self.0.progress(&Progress {
-            stage: format!("{}, {}", p.stage, self.1),
-            ..p.clone()
-        });
+        let stage = if self.before {
+            format!("{}, {}", self.label, p.stage)
+        } else {
+            format!("{}, {}", p.stage, self.label)
+        };
+        self.control.progress(&Progress { stage, ..p.clone() });
     }
     fn cancelled(&self) -> bool {
-        self.0.cancelled()
+        self.control.cancelled()
     }
     fn cancelled_before(&self, seconds: f64) -> bool {
-        self.0.cancelled_before(seconds)
+        self.control.cancelled_before(seconds)
     }
 }
 

@@ -565,7 +565,7 @@ fn restore(
             first.stop_detail.clone()
         }
     };
-    let restoration = super::Renamed(control, "restoration");
+    let restoration = super::Renamed::after(control, "restoration");
     let (flat, report) = match fl_mesh::solve(start, &fl, &restoration) {
         Ok(done) => done,
         Err(AlgoError::Cancelled) => return Err(AlgoError::Cancelled),
@@ -606,7 +606,7 @@ fn restore(
         flat.positions(),
         movable,
         params,
-        &super::Renamed(control, "after restoration"),
+        &super::Renamed::after(control, "after restoration"),
     )?;
     // Never worse: fl-mesh's ϖ and E's g are measured by different code, so a start at the
     // tolerance could come back above it.

@@ -151,39 +151,41 @@ pub fn cone_start(mesh: &Mesh) -> Result<Mesh, NoCone> {
 /// Above 1 no flattenable surface keeps the patch's area: it must shrink by this factor at
 /// least (a shoe's upper: 10.9). None when the mesh is not one disk.
 pub fn isoperimetric_excess(mesh: &Mesh) -> Option<f64> {
-    let conn = mesh.conn();
-    let patches = conn.patches();
-    let disk = patches.len() == 1
-        && patches[0].boundary_loops.len() == 1
-        && patches[0].euler_characteristic() == 1
-        && conn.components(mesh.triangles().len()) == 1;
-    if !disk {
+    if !one_disk(mesh) {
         return None;
     }
-    let loop_ = &patches[0].boundary_loops[0];
-    let m = loop_.len();
-    let perimeter: f64 = (0..m)
-        .map(|i| {
-            let e = sub(mesh.position(loop_[(i + 1) % m]), mesh.position(loop_[i]));
-            dot(e, e).sqrt()
-        })
-        .sum();
+    let perimeter: f64 = boundary_lengths(mesh).iter().sum();
     let area: f64 = geometry::face_areas(mesh).iter().sum();
     let excess = area / (perimeter * perimeter / (4.0 * std::f64::consts::PI));
     excess.is_finite().then_some(excess)
 }
 
-/// The frame of a disk that is a height field over the plane orthogonal to its area-weighted
-/// mean normal d, or why the mesh is not one.
-fn disk_frame(mesh: &Mesh) -> Result<Frame, NoCone> {
+/// Whether the mesh is one patch forming one disk: one component, one boundary loop, χ = 1.
+fn one_disk(mesh: &Mesh) -> bool {
     let conn = mesh.conn();
     let patches = conn.patches();
-    let disk = patches.len() == 1
+    patches.len() == 1
         && patches[0].boundary_loops.len() == 1
         && patches[0].euler_characteristic() == 1
         && conn.components(mesh.triangles().len()) == 1
-        && !conn.kinds().contains(&VertexKind::Seam);
-    if !disk {
+}
+
+/// The lengths of a one-disk mesh's boundary edges, in loop order (edge i from point i).
+fn boundary_lengths(mesh: &Mesh) -> Vec<f64> {
+    let loop_ = &mesh.conn().patches()[0].boundary_loops[0];
+    let m = loop_.len();
+    (0..m)
+        .map(|i| {
+            let e = sub(mesh.position(loop_[(i + 1) % m]), mesh.position(loop_[i]));
+            dot(e, e).sqrt()
+        })
+        .collect()
+}
+
+/// The frame of a disk that is a height field over the plane orthogonal to its area-weighted
+/// mean normal d, or why the mesh is not one.
+fn disk_frame(mesh: &Mesh) -> Result<Frame, NoCone> {
+    if !one_disk(mesh) || mesh.conn().kinds().contains(&VertexKind::Seam) {
         return Err(NoCone::NotADisk);
     }
     let normals = geometry::face_normals(mesh);
@@ -414,12 +416,7 @@ fn layout(mesh: &Mesh) -> Result<(Frame, Layout), NoCone> {
         let c = cross(b[i], b[(i + 1) % m]);
         [s[0] + c[0], s[1] + c[1], s[2] + c[2]]
     });
-    let lengths: Vec<f64> = (0..m)
-        .map(|i| {
-            let e = sub(b[(i + 1) % m], b[i]);
-            dot(e, e).sqrt()
-        })
-        .collect();
+    let lengths = boundary_lengths(mesh);
     let perimeter: f64 = lengths.iter().sum();
     // A boundary that encloses (almost) no area on any plane leaves no polygon to map into.
     let enclosed = dot(twice_area, twice_area).sqrt();

@@ -64,24 +64,38 @@ fn extract(mesh: &Mesh, name: String, faces: Vec<u32>) -> Option<Part> {
         triangles.push(t);
     }
     let patch = mesh.face_patch()[faces[0] as usize] as usize;
-    let raw = RawMesh {
-        positions: vertices.iter().map(|&v| mesh.position(v)).collect(),
-        triangles: triangles.clone(),
-        face_patch: vec![0; faces.len()],
-        patch_names: vec![mesh.patch_names()[patch].clone()],
-        uv: None,
-    };
-    let (sub, _) = Mesh::new(raw).ok()?;
+    let name_of_patch = mesh.patch_names()[patch].clone();
+    let sub = submesh(mesh, &vertices, triangles, name_of_patch)?;
     let conn = mesh.conn();
-    let faithful = sub.triangles() == &triangles[..]
-        && (0..vertices.len() as u32)
-            .all(|l| sub.conn().is_interior(l) == conn.is_interior(vertices[l as usize]));
+    let faithful = (0..vertices.len() as u32)
+        .all(|l| sub.conn().is_interior(l) == conn.is_interior(vertices[l as usize]));
     faithful.then_some(Part {
         name,
         mesh: sub,
         vertices,
         faces,
     })
+}
+
+/// The one-patch mesh of `source`'s `vertices` (in that order) and `triangles` (local
+/// indices), or None when it does not validate as exactly those triangles (same order and
+/// orientation).
+fn submesh(
+    source: &Mesh,
+    vertices: &[u32],
+    triangles: Vec<[u32; 3]>,
+    patch_name: String,
+) -> Option<Mesh> {
+    let raw = RawMesh {
+        positions: vertices.iter().map(|&v| source.position(v)).collect(),
+        face_patch: vec![0; triangles.len()],
+        triangles,
+        patch_names: vec![patch_name],
+        uv: None,
+    };
+    let kept = raw.triangles.clone();
+    let (sub, _) = Mesh::new(raw).ok()?;
+    (sub.triangles() == &kept[..]).then_some(sub)
 }
 
 /// The whole mesh with each part's output put back: moved vertices in place, and where a
@@ -138,12 +152,13 @@ pub(super) fn global_vertex(part: &Part, first_new: u32, l: u32) -> u32 {
 pub(super) fn restrict(out: &Mesh, mesh: &Mesh, parts: &[Part]) -> Option<Vec<(Mesh, Vec<u32>)>> {
     let (nv, nf) = (mesh.num_vertices(), mesh.num_faces());
     let mut group_of = vec![NONE; out.num_faces()];
-    for (g, (_, faces)) in crate::mesh::patch_components(out).iter().enumerate() {
+    let groups = crate::mesh::patch_components(out);
+    for (g, (_, faces)) in groups.iter().enumerate() {
         for &f in faces {
             group_of[f as usize] = g as u32;
         }
     }
-    let mut appended: Vec<Vec<u32>> = vec![Vec::new(); out.num_faces()];
+    let mut appended: Vec<Vec<u32>> = vec![Vec::new(); groups.len()];
     for f in nf..out.num_faces() {
         appended[group_of[f] as usize].push(f as u32);
     }
@@ -176,15 +191,9 @@ pub(super) fn restrict(out: &Mesh, mesh: &Mesh, parts: &[Part]) -> Option<Vec<(M
             for &v in &vertices {
                 local[v as usize] = NONE;
             }
-            let raw = RawMesh {
-                positions: vertices.iter().map(|&v| out.position(v)).collect(),
-                triangles: triangles.clone(),
-                face_patch: vec![0; triangles.len()],
-                patch_names: part.mesh.patch_names().to_vec(),
-                uv: None,
-            };
-            let (sub, _) = Mesh::new(raw).ok()?;
-            (sub.triangles() == &triangles[..]).then_some((sub, vertices))
+            let name = part.mesh.patch_names()[0].clone();
+            let sub = submesh(out, &vertices, triangles, name)?;
+            Some((sub, vertices))
         })
         .collect()
 }
