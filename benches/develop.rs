@@ -1,10 +1,15 @@
 //! `develop` at the size of Wang and Tang's examples II and III (3,047 and 3,016 vertices; the
 //! paper: global 310–390 s, local 1–23 s on a PIII 900): ../shared/meshes'
-//! garment/diffavatar_tshirt.obj (2,799 vertices), and the same garment after two levels of
-//! Loop subdivision (≈ 44k vertices) to show how the cost grows. Targets: global < 2 s (either
-//! solver) and local < 0.1 s at 3k.
+//! garment/diffavatar_tshirt.obj (2,799 vertices), each method with its defaults. Targets:
+//! global < 2 s (either solver) and local < 0.1 s at 3k.
 //!
-//! Before timing, one checked run per method prints its iterations, g_max in and out (measured
+//! How the cost grows: the same garment after two levels of Loop subdivision (44,100
+//! vertices) against the 2.8k one, each with the same fixed budget (`sqp` 10 iterations
+//! without restoration, `penalty_cg` 20 phases, `local` 50,000 moves), so the ratio of the
+//! medians is the growth of one iteration's cost. A full `sqp` run at 44k takes minutes (279 s
+//! measured, with its fl-mesh restoration), too long for criterion's ten samples.
+//!
+//! Before timing, one checked run per case prints its iterations, g_max in and out (measured
 //! by `geometry`), δS, the stop reason and the run's peak heap.
 
 use criterion::{criterion_group, criterion_main, Criterion};
@@ -19,16 +24,49 @@ use std::time::Duration;
 mod peak_alloc;
 use peak_alloc::{LIVE, PEAK};
 
-fn methods() -> Vec<(&'static str, Params)> {
-    let p = |method, solver| Params {
+fn p(method: Method, solver: Solver) -> Params {
+    Params {
         method,
         solver,
         ..Params::default()
-    };
+    }
+}
+
+/// Each method with its defaults.
+fn methods() -> Vec<(&'static str, Params)> {
     vec![
         ("global_sqp", p(Method::Global, Solver::Sqp)),
         ("global_penalty_cg", p(Method::Global, Solver::PenaltyCg)),
         ("local", p(Method::Local, Solver::Sqp)),
+    ]
+}
+
+/// Each method with a fixed budget, for the growth of the cost with the mesh.
+fn budgets() -> Vec<(&'static str, Params)> {
+    vec![
+        (
+            "global_sqp_10_iterations",
+            Params {
+                max_iterations: 10,
+                restore: false,
+                ..p(Method::Global, Solver::Sqp)
+            },
+        ),
+        (
+            "global_penalty_cg_20_phases",
+            Params {
+                max_iterations: 20,
+                eta: 1e-12,
+                ..p(Method::Global, Solver::PenaltyCg)
+            },
+        ),
+        (
+            "local_50000_moves",
+            Params {
+                max_moves: 50_000,
+                ..p(Method::Local, Solver::Sqp)
+            },
+        ),
     ]
 }
 
@@ -49,13 +87,18 @@ fn bench(c: &mut Criterion) {
     group
         .sample_size(10)
         .measurement_time(Duration::from_secs(20));
-    for (label, mesh) in [("tshirt2.8k", &tshirt), ("tshirt_loop2", &big)] {
+    let cases = [
+        ("tshirt2.8k", &tshirt, methods()),
+        ("tshirt2.8k", &tshirt, budgets()),
+        ("tshirt_loop2_44k", &big, budgets()),
+    ];
+    for (label, mesh, runs) in cases {
         println!(
             "{label}: {} V / {} F",
             mesh.num_vertices(),
             mesh.num_faces()
         );
-        for (name, params) in methods() {
+        for (name, params) in runs {
             let base = LIVE.load(Ordering::Relaxed);
             PEAK.store(base, Ordering::Relaxed);
             let t = std::time::Instant::now();
