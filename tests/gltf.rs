@@ -982,3 +982,30 @@ fn every_shared_mesh_round_trips_through_glb() {
     }
     assert!(checked >= 14, "only {checked} shared meshes loaded");
 }
+
+/// A required extension that only concerns how the model looks (a texture transform, a sheen
+/// material) is ignored with a warning naming it; one that changes the geometry (Draco) is
+/// still refused, by name.
+#[test]
+fn look_only_required_extensions_are_ignored_geometry_ones_refused() {
+    let mut d = Doc::new();
+    let pos = d.positions(&SQUARE);
+    let idx = d.indices_u16(&[0, 1, 2, 0, 2, 3]);
+    let meshes =
+        json!([{"name": "sq", "primitives": [{"attributes": {"POSITION": pos}, "indices": idx}]}]);
+    let mut doc = d.finish(meshes, json!([{"mesh": 0}]));
+    let looks = ["KHR_texture_transform", "KHR_materials_sheen"];
+    doc["extensionsUsed"] = json!(looks);
+    doc["extensionsRequired"] = json!(looks);
+    let (mesh, warnings) = read_doc(&doc).unwrap();
+    assert_eq!(mesh.num_faces(), 2);
+    let w = warnings
+        .iter()
+        .find(|w| w.code == "extensions_ignored")
+        .expect("a warning");
+    assert!(looks.iter().all(|e| w.message.contains(e)), "{}", w.message);
+    doc["extensionsUsed"] = json!(["KHR_texture_transform", "KHR_draco_mesh_compression"]);
+    doc["extensionsRequired"] = json!(["KHR_texture_transform", "KHR_draco_mesh_compression"]);
+    let err = read_doc(&doc).unwrap_err().to_string();
+    assert!(err.contains("KHR_draco_mesh_compression"), "{err}");
+}

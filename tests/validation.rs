@@ -133,9 +133,10 @@ fn non_manifold_edge() {
 }
 
 #[test]
-fn non_manifold_vertex() {
-    // Two triangles touching only at vertex 0 (a bow-tie).
-    let e = Mesh::new(raw(
+fn bow_tie_vertex_is_split_one_vertex_per_fan() {
+    // Two triangles touching only at vertex 0 (a bow-tie): the second fan gets vertex 5, at
+    // the same position; no index of the input changes.
+    let (mesh, warnings) = Mesh::new(raw(
         vec![
             [0.0, 0.0, 0.0],
             [1.0, 0.0, 0.0],
@@ -145,8 +146,40 @@ fn non_manifold_vertex() {
         ],
         vec![[0, 1, 2], [0, 3, 4]],
     ))
-    .unwrap_err();
-    assert_eq!(e, MeshError::NonManifoldVertex { vertex: 0, fans: 2 });
+    .unwrap();
+    assert_eq!(mesh.num_vertices(), 6);
+    assert_eq!(mesh.triangles(), &[[0, 1, 2], [5, 3, 4]]);
+    assert_eq!(mesh.position(5), mesh.position(0));
+    assert_eq!(mesh.conn().boundary_loops().len(), 2);
+    let w = warnings
+        .iter()
+        .find(|w| w.code == "bow_tie_vertices_split")
+        .expect("a warning");
+    assert!(w.message.contains("0 → 0 and 5"), "{}", w.message);
+}
+
+#[test]
+fn bow_tie_with_three_fans_gets_two_new_vertices() {
+    // Three triangles around vertex 0, pairwise touching only there.
+    let (mesh, warnings) = Mesh::new(raw(
+        vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [-1.0, 0.0, 0.0],
+            [-1.0, -1.0, 0.0],
+            [0.0, 1.0, 1.0],
+            [0.0, 1.0, 2.0],
+        ],
+        vec![[0, 1, 2], [0, 3, 4], [0, 5, 6]],
+    ))
+    .unwrap();
+    assert_eq!(mesh.num_vertices(), 9);
+    let at_origin = mesh.triangles().iter().map(|t| t[0]).collect::<Vec<_>>();
+    assert_eq!(at_origin, vec![0, 7, 8]);
+    assert!(warnings
+        .iter()
+        .any(|w| w.code == "bow_tie_vertices_split" && w.message.starts_with("1 vertices")));
 }
 
 #[test]

@@ -72,8 +72,8 @@ pub fn read_limited(
     bytes: &[u8],
     limits: &super::Limits,
 ) -> Result<(RawMesh, Vec<Warning>), ReadError> {
-    let parsed = super::quietly(|| gltf::Gltf::from_slice(bytes));
-    let doc = match parsed {
+    let parsed = super::quietly(|| parse(bytes));
+    let (doc, dropped) = match parsed {
         Ok(Ok(doc)) => doc,
         Ok(Err(e)) => return Err(err(describe_gltf_error(&e))),
         Err(why) => {
@@ -90,7 +90,41 @@ pub fn read_limited(
         .map(|d| d.as_deref().unwrap_or(blob))
         .collect();
     check_expansion(&doc, &buffers, limits)?;
-    assemble(&doc, &buffers, limits)
+    let (raw, mut warnings) = assemble(&doc, &buffers, limits)?;
+    if !dropped.is_empty() {
+        warnings.push(Warning::new(
+            "extensions_ignored",
+            format!(
+                "required extensions ignored (they concern materials, textures or lights, \
+                 not geometry): {}",
+                dropped.join(", ")
+            ),
+        ));
+    }
+    Ok((raw, warnings))
+}
+
+/// Whether a required extension only changes how the model looks (materials, textures,
+/// lights), never its geometry: such a requirement is dropped, not refused, so that a
+/// garment exported with, say, a sheen material or a texture transform still loads. Those
+/// that change geometry (Draco, meshopt, quantization, ...) stay required, and unsupported.
+fn looks_only(extension: &str) -> bool {
+    extension.starts_with("KHR_materials_")
+        || extension.starts_with("KHR_texture_")
+        || extension.starts_with("EXT_texture_")
+        || matches!(extension, "KHR_lights_punctual" | "KHR_xmp_json_ld")
+}
+
+/// The validated document, and the required extensions dropped by [`looks_only`].
+fn parse(bytes: &[u8]) -> Result<(gltf::Gltf, Vec<String>), gltf::Error> {
+    let gltf::Gltf { document, blob } = gltf::Gltf::from_slice_without_validation(bytes)?;
+    let mut root = document.into_json();
+    let (dropped, kept) = std::mem::take(&mut root.extensions_required)
+        .into_iter()
+        .partition(|e| looks_only(e));
+    root.extensions_required = kept;
+    let document = gltf::Document::from_json(root)?;
+    Ok((gltf::Gltf { document, blob }, dropped))
 }
 
 /// Refuse a scene that expands past `limits`, counting from accessor counts alone (each

@@ -15,7 +15,7 @@
 //! | NaN/∞ coordinate | fatal, names vertex and axis |
 //! | triangle with a repeated index or zero area | fatal, names the face |
 //! | edge with more than two faces | fatal, names the edge and its faces |
-//! | vertex with more than one fan (bow-tie) | fatal, names the vertex |
+//! | vertex with more than one fan (bow-tie) | repaired: each fan after the first gets a new vertex at the same position (numbered after the file's), with a warning naming them |
 //! | duplicate face (same three vertices) | fatal, names both faces |
 //! | inconsistent orientation, orientable component | repaired: the minority of the component's faces is flipped, with a warning naming them |
 //! | non-orientable component | fatal, names an edge where orientation cannot agree |
@@ -222,7 +222,7 @@ impl Mesh {
     /// Validate `raw` and build its connectivity. Returns the mesh and what was repaired.
     pub fn new(raw: RawMesh) -> Result<(Mesh, Vec<Warning>), MeshError> {
         let RawMesh {
-            positions,
+            mut positions,
             mut triangles,
             mut face_patch,
             mut patch_names,
@@ -274,6 +274,8 @@ impl Mesh {
         check_faces(&positions, &triangles)?;
         let mut warnings = Vec::new();
         compact_patches(&mut face_patch, &mut patch_names, &mut warnings);
+        split_bow_ties(&mut positions, &mut triangles, &mut warnings);
+        let nv = positions.len();
         let before = uv.as_ref().map(|_| triangles.clone());
         let conn = Connectivity::build(
             nv,
@@ -413,6 +415,88 @@ impl Mesh {
                 .referenced_vertices()
                 .map(|v| self.positions[v as usize]),
         )
+    }
+}
+
+/// Give each fan of a bow-tie vertex (faces around it that meet only at it, e.g. where two
+/// boundary loops touch) its own vertex at the same position: the surface is the same, and
+/// every algorithm needs one fan per vertex. The first fan keeps the vertex; the others get
+/// new vertices numbered after the existing ones. Said in a warning.
+fn split_bow_ties(
+    positions: &mut Vec<[f64; 3]>,
+    triangles: &mut [[u32; 3]],
+    warnings: &mut Vec<Warning>,
+) {
+    // Corners sorted by vertex: (vertex, face, the two other vertices).
+    let mut corners: Vec<(u32, u32, u32, u32)> = Vec::with_capacity(3 * triangles.len());
+    for (f, t) in triangles.iter().enumerate() {
+        for k in 0..3 {
+            corners.push((t[k], f as u32, t[(k + 1) % 3], t[(k + 2) % 3]));
+        }
+    }
+    corners.sort_unstable();
+    let mut split: Vec<(u32, u32)> = Vec::new();
+    let (mut parent, mut via) = (Vec::new(), std::collections::HashMap::new());
+    for group in corners.chunk_by(|a, b| a.0 == b.0) {
+        // Union–find over the vertex's faces, joined through each neighbour they share.
+        parent.clear();
+        parent.extend(0..group.len());
+        via.clear();
+        fn root(parent: &mut [usize], mut i: usize) -> usize {
+            while parent[i] != i {
+                parent[i] = parent[parent[i]];
+                i = parent[i];
+            }
+            i
+        }
+        for (i, c) in group.iter().enumerate() {
+            for w in [c.2, c.3] {
+                if let Some(&j) = via.get(&w) {
+                    let (a, b) = (root(&mut parent, i), root(&mut parent, j));
+                    parent[a.max(b)] = a.min(b);
+                } else {
+                    via.insert(w, i);
+                }
+            }
+        }
+        let v = group[0].0;
+        let mut copy_of_root = std::collections::HashMap::new();
+        for i in 0..group.len() {
+            let r = root(&mut parent, i);
+            if r == root(&mut parent, 0) {
+                continue;
+            }
+            let copy = *copy_of_root.entry(r).or_insert_with(|| {
+                positions.push(positions[v as usize]);
+                let copy = (positions.len() - 1) as u32;
+                split.push((v, copy));
+                copy
+            });
+            for x in triangles[group[i].1 as usize].iter_mut() {
+                if *x == v {
+                    *x = copy;
+                }
+            }
+        }
+    }
+    if !split.is_empty() {
+        let mut vertices: Vec<u32> = split.iter().map(|s| s.0).collect();
+        vertices.dedup();
+        let shown: Vec<String> = split
+            .iter()
+            .take(5)
+            .map(|(v, c)| format!("{v} → {v} and {c}"))
+            .collect();
+        warnings.push(Warning::new(
+            "bow_tie_vertices_split",
+            format!(
+                "{} vertices where separate fans of faces met were split, one vertex per \
+                 fan at the same position ({}{})",
+                vertices.len(),
+                shown.join(", "),
+                if split.len() > 5 { ", …" } else { "" }
+            ),
+        ));
     }
 }
 
