@@ -598,15 +598,30 @@ fn sphere_cap(deg: f64) -> Mesh {
 /// A piece that cannot lie flat (a whole T-shirt body as one patch, χ = −2) is still
 /// flattened, but the job says so in words; a piece that can lie flat gets no such warning.
 /// With the defaults the T-shirt lies without a flip (the paper as written, surface angles
-/// and harmonic interior, gives 5), so the warning is about its distortion.
+/// and harmonic interior, gives 5), so the warning is about its distortion. A pattern smaller
+/// than its surface is warned about as well as a larger one: a 60° spherical cap laid out
+/// from its boundary's lengths has the area of the flat disk of that perimeter, π sin²60° R²
+/// against the cap's π R² (−25 %), and the pouch (a sphere with a small opening, like a
+/// closed-toe sock) far less.
 #[test]
 fn unflattenable_piece_is_named_in_a_warning() {
-    let ok = flatten::run(&sphere_cap(60.0), &Params::default(), &Silent::default()).unwrap();
-    assert_eq!(
-        ok.patterns.unwrap().pieces[0].measures["flipped_triangles"],
-        0
-    );
-    assert!(ok.summary.job_warnings.is_empty());
+    for (label, mesh, bound) in [
+        ("cap", sphere_cap(60.0), 100.0 * (0.75 - 1.0)),
+        ("pouch", flatmesh::corpus::pouch(24), -80.0),
+    ] {
+        let out = flatten::run(&mesh, &Params::default(), &Silent::default()).unwrap();
+        let piece = &out.patterns.as_ref().unwrap().pieces[0];
+        assert_eq!(piece.measures["flipped_triangles"], 0, "{label}");
+        let a = piece.measures["area_distortion_pct"].as_f64().unwrap();
+        assert!(a < 0.9 * bound, "{label}: area distortion {a} %");
+        let ws = &out.summary.job_warnings;
+        assert_eq!(ws.len(), 1, "{label}: {ws:?}");
+        assert!(
+            ws[0].contains("not developable") && ws[0].contains(&format!("{a:+.1} %")),
+            "{label}: {}",
+            ws[0]
+        );
+    }
     let Some(shirt) = shared("garment/diffavatar_tshirt.obj") else {
         return;
     };

@@ -906,15 +906,18 @@ fn piece_warning(p: &Piece, i: &PieceInfo, params: &Params) -> Option<String> {
         };
         what.push(format!("{overlap}; {why}"));
     } else if num("varpi_max") > DEVELOPABLE_TOLERANCE
-        && num("area_distortion_pct") > DISTORTION_WARNING_PCT
+        && num("area_distortion_pct").abs() > DISTORTION_WARNING_PCT
     {
+        // Signed: a pattern smaller than its surface (a closed-toe sock laid out from its
+        // opening: −94 %) is as wrong as a larger one.
         what.push(format!(
             "it is not developable (ϖ_max {:.3e} rad), so its pattern is distorted (area \
-             distortion {:.1} %, stretch up to {:.1} %): make it more developable (fl-mesh) or \
-             split it into patches",
+             distortion {:+.1} %, stretch up to {:.1} %, compression up to {:.1} %): make it \
+             more developable (fl-mesh) or split it into patches",
             num("varpi_max"),
             num("area_distortion_pct"),
-            num("stretch_max_pct")
+            num("stretch_max_pct"),
+            num("compression_max_pct")
         ));
     }
     (!what.is_empty()).then(|| format!("piece `{}`: {}", p.patch, what.join("; ")))
