@@ -310,6 +310,9 @@ fn run(
     for w in outcome.figures.warnings() {
         eprintln!("flatmesh: warning: {w}");
     }
+    for w in outcome.shape.iter().flat_map(|s| &s.warnings) {
+        eprintln!("flatmesh: warning: {w}");
+    }
     for w in &outcome.pattern_warnings {
         eprintln!("flatmesh: warning: patterns of the output: {w}");
     }

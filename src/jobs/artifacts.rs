@@ -51,6 +51,69 @@ pub fn derive_patterns(outcome: &mut JobOutcome, control: &dyn Control) -> Resul
     }
 }
 
+/// How a mesh-changing job's output compares with its input in what no measure of
+/// flattenability sees: folds (edges whose faces turn by more than 120°,
+/// [`crate::geometry::FOLD_ANGLE`]) and the smallest corner angle (degrees).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct ShapeCheck {
+    /// Folds of the input.
+    pub folds_before: usize,
+    /// Folds of the output.
+    pub folds_after: usize,
+    /// Smallest corner angle of the input, degrees.
+    pub min_angle_before: f64,
+    /// Smallest corner angle of the output, degrees.
+    pub min_angle_after: f64,
+    /// What a user should know: new folds, or new slivers below 1° (empty otherwise).
+    pub warnings: Vec<String>,
+}
+
+/// Corners below this (degrees) that the input did not have are warned about.
+pub const SLIVER_DEGREES: f64 = 1.0;
+
+/// The [`ShapeCheck`] of a job whose output mesh is not its input's geometry (None for the
+/// others). A flattenable output can still be crumpled: measured on unseen whole garments
+/// (several openings, one patch), fl-mesh converged with 41–308 new folds where sleeves and
+/// body meet, and said nothing.
+pub fn check_shape(input: &Mesh, outcome: &JobOutcome) -> Option<ShapeCheck> {
+    let out = outcome.mesh.as_ref()?;
+    if out.positions() == input.positions() {
+        return None;
+    }
+    let smallest = |m: &Mesh| {
+        crate::geometry::min_corner_angles(m)
+            .into_iter()
+            .fold(std::f64::consts::PI, f64::min)
+            .to_degrees()
+    };
+    let folds_before = crate::geometry::fold_edges(input).len();
+    let folds_after = crate::geometry::fold_edges(out).len();
+    let (min_angle_before, min_angle_after) = (smallest(input), smallest(out));
+    let mut warnings = Vec::new();
+    if folds_after > folds_before {
+        warnings.push(format!(
+            "the output is crumpled: {folds_after} edges fold (their faces turn by more than \
+             120°), the input's {folds_before}; look at mesh.glb before using it. A patch that \
+             cannot become flattenable smoothly with its boundary kept (e.g. a whole garment \
+             whose sleeves or legs join its body) folds there: cut it into panels first \
+             (segment, or patches in the file)"
+        ));
+    }
+    if min_angle_after < SLIVER_DEGREES.min(min_angle_before) {
+        warnings.push(format!(
+            "the output has sliver triangles: its smallest corner is {min_angle_after:.2}° \
+             (the input's {min_angle_before:.2}°)"
+        ));
+    }
+    Some(ShapeCheck {
+        folds_before,
+        folds_after,
+        min_angle_before,
+        min_angle_after,
+        warnings,
+    })
+}
+
 /// `report.json`: the report of the output mesh (the input when the job does not change it),
 /// and under `"job"` the job's own figures with its `kind` and `seconds`, so that no figure of
 /// the job shadows one of the mesh report.
@@ -74,6 +137,12 @@ pub fn job_report(
     }
     if let Some(why) = &outcome.patterns_unavailable {
         job.insert("patterns_unavailable".into(), why.clone().into());
+    }
+    if let Some(shape) = &outcome.shape {
+        job.insert(
+            "shape".into(),
+            serde_json::to_value(shape).unwrap_or_default(),
+        );
     }
     let mut value = serde_json::to_value(report).unwrap_or_default();
     if let Some(obj) = value.as_object_mut() {
@@ -182,4 +251,74 @@ fn push_mesh(
         media_type: "model/obj",
         bytes: io::obj::write(&mesh.to_raw()).into_bytes(),
     });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::RawMesh;
+
+    /// A 3×3-vertex square sheet (8 triangles) with its centre at `centre`.
+    fn sheet(centre: [f64; 3]) -> Mesh {
+        let mut positions = Vec::new();
+        for j in 0..3 {
+            for i in 0..3 {
+                positions.push([i as f64, j as f64, 0.0]);
+            }
+        }
+        positions[4] = centre;
+        let id = |i: u32, j: u32| j * 3 + i;
+        let mut triangles = Vec::new();
+        for j in 0..2 {
+            for i in 0..2 {
+                triangles.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+                triangles.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+            }
+        }
+        Mesh::new(RawMesh {
+            positions,
+            triangles,
+            ..RawMesh::default()
+        })
+        .unwrap()
+        .0
+    }
+
+    fn outcome(mesh: Mesh) -> JobOutcome {
+        JobOutcome {
+            mesh: Some(mesh),
+            patterns: None,
+            levels: Vec::new(),
+            figures: super::super::Figures::Report(Default::default()),
+            pattern_warnings: Vec::new(),
+            patterns_unavailable: None,
+            shape: None,
+        }
+    }
+
+    /// Pulling the centre of a flat sheet past the sheet's corner (and a little below) makes the
+    /// faces around it turn over against the others: folds, counted and warned about; the
+    /// same geometry is not checked, a smooth bump warns of nothing, and a centre moved next to
+    /// the boundary leaves a sliver.
+    #[test]
+    fn new_folds_and_slivers_are_warned_about() {
+        let flat = sheet([1.0, 1.0, 0.0]);
+        assert_eq!(check_shape(&flat, &outcome(flat.clone())), None);
+        let bump = check_shape(&flat, &outcome(sheet([1.0, 1.0, 0.3]))).unwrap();
+        assert_eq!((bump.folds_before, bump.folds_after), (0, 0));
+        assert!(bump.warnings.is_empty(), "{:?}", bump.warnings);
+        let crumpled = sheet([2.6, 2.4, -0.05]);
+        let check = check_shape(&flat, &outcome(crumpled.clone())).unwrap();
+        let folds = crate::geometry::fold_edges(&crumpled).len();
+        assert!(folds > 0);
+        assert_eq!((check.folds_before, check.folds_after), (0, folds));
+        assert!(check.warnings[0].contains(&format!("{folds} edges fold")));
+        // The centre next to a boundary vertex: a corner of a few tenths of a degree.
+        let sliver = sheet([1.0, 0.004, 0.0]);
+        let check = check_shape(&flat, &outcome(sliver)).unwrap();
+        assert_eq!(check.folds_after, 0);
+        assert!(check.min_angle_after < SLIVER_DEGREES && check.min_angle_before == 45.0);
+        assert_eq!(check.warnings.len(), 1, "{:?}", check.warnings);
+        assert!(check.warnings[0].contains("sliver"));
+    }
 }

@@ -342,6 +342,7 @@ impl JobSpec {
     /// its output ([`artifacts::derive_patterns`]).
     pub fn run(&self, input: &Input, control: &dyn Control) -> Result<JobOutcome, AlgoError> {
         let mut outcome = self.run_algorithm(input, control)?;
+        outcome.shape = artifacts::check_shape(&input.mesh, &outcome);
         artifacts::derive_patterns(&mut outcome, control)?;
         Ok(outcome)
     }
@@ -469,6 +470,8 @@ pub struct JobOutcome {
     pub pattern_warnings: Vec<String>,
     /// Why a mesh-changing job's output could not be flattened.
     pub patterns_unavailable: Option<String>,
+    /// Folds and slivers of a mesh-changing job's output against its input.
+    pub shape: Option<artifacts::ShapeCheck>,
 }
 
 trait IntoJob<S> {
@@ -484,6 +487,7 @@ impl<S> IntoJob<S> for algorithms::Outcome<S> {
             figures: wrap(self.summary),
             pattern_warnings: Vec::new(),
             patterns_unavailable: None,
+            shape: None,
         }
     }
 }

@@ -809,6 +809,9 @@ fn job_warnings(
     if let Some(why) = &outcome.patterns_unavailable {
         out.push(serde_json::json!({"code": "patterns_unavailable", "message": why}));
     }
+    for w in outcome.shape.iter().flat_map(|s| &s.warnings) {
+        out.push(serde_json::json!({"code": "shape", "message": w}));
+    }
     for w in outcome
         .figures
         .pattern_warnings()
