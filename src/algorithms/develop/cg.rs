@@ -13,6 +13,18 @@
 //! degenerate, or J not finite, count as an increase. Of the phase iterates, the one with the lowest G is
 //! returned (the last one, unless a phase made G worse): G is what the penalty drives down;
 //! g_max may rise while G falls (on the hemisphere fixture it does for the whole run).
+//!
+//! What the schedule can reach (measured, issue 16 note of 2026-11-26). ρ_k G_k² is fixed, so
+//! the phases converge to a stationary point of E + c·log G (c = mean l⁰²), not to G = 0:
+//! where flattening costs real stretch the pull c∇G/G is spent against E. The paper's
+//! inputs were near developable (g⁰_max 0.09–0.19) and ended near 1e-3. On gf_skirt_3D_0
+//! (g⁰_max 0.034) 5 steps per phase reach 6.7e-3 in 200 phases and 50 steps 9.9e-7 in 293; on
+//! diffavatar_tshirt (g⁰_max 0.52, which needs δS ≈ 10 % to flatten) the phases stall at
+//! g_max 0.22 (5 steps, η) and 0.17 (50 steps × 1000 phases, G and ρ constant: the fixed
+//! point), on mh_shoes01 at 0.26. An augmented Lagrangian on the vector g with the same CG
+//! (first-order multipliers, ρ grown when g_max did not fall) was tried and not kept: 3.3e-3
+//! on the t-shirt and 2.4e-2 on the shoe after 10,000 CG steps, with ρ growing past 1e18
+//! (capping it made every mesh worse). `sqp` is the solver that reaches 1e-6 on both.
 
 use super::energy::{big_g, g_max, Model};
 use super::{HistoryEntry, Params, Run, Stop};
