@@ -95,7 +95,7 @@ pub fn read_limited(
         warnings.push(Warning::new(
             "extensions_ignored",
             format!(
-                "required extensions ignored (they concern materials, textures or lights, \
+                "required extensions ignored (they concern materials, a texture transform or lights, \
                  not geometry): {}",
                 dropped.join(", ")
             ),
@@ -104,15 +104,15 @@ pub fn read_limited(
     Ok((raw, warnings))
 }
 
-/// Whether a required extension only changes how the model looks (materials, textures,
-/// lights), never its geometry: such a requirement is dropped, not refused, so that a
-/// garment exported with, say, a sheen material or a texture transform still loads. Those
-/// that change geometry (Draco, meshopt, quantization, ...) stay required, and unsupported.
+/// Whether a required extension only changes how the model looks (materials, a texture
+/// transform, lights), never its geometry: such a requirement is dropped, not refused, so
+/// that a garment exported with, say, a sheen material still loads. Those that change
+/// geometry (Draco, meshopt, quantization), and those that replace a texture's image source
+/// (basisu, webp, avif: the document is not valid glTF without them), stay required and
+/// are refused by name.
 fn looks_only(extension: &str) -> bool {
     extension.starts_with("KHR_materials_")
-        || extension.starts_with("KHR_texture_")
-        || extension.starts_with("EXT_texture_")
-        || matches!(extension, "KHR_lights_punctual" | "KHR_xmp_json_ld")
+        || matches!(extension, "KHR_texture_transform" | "KHR_lights_punctual")
 }
 
 /// The validated document, and the required extensions dropped by [`looks_only`].

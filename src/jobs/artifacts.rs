@@ -60,6 +60,11 @@ pub struct ShapeCheck {
     pub folds_before: usize,
     /// Folds of the output.
     pub folds_after: usize,
+    /// Total length of the input's folded edges (mesh units).
+    pub fold_length_before: f64,
+    /// Total length of the output's folded edges: unlike the count, it does not grow when
+    /// refinement or subdivision splits a fold that was already there.
+    pub fold_length_after: f64,
     /// Smallest corner angle of the input, degrees.
     pub min_angle_before: f64,
     /// Smallest corner angle of the output, degrees.
@@ -86,11 +91,19 @@ pub fn check_shape(input: &Mesh, outcome: &JobOutcome) -> Option<ShapeCheck> {
             .fold(std::f64::consts::PI, f64::min)
             .to_degrees()
     };
-    let folds_before = crate::geometry::fold_edges(input).len();
-    let folds_after = crate::geometry::fold_edges(out).len();
+    let folds = |m: &Mesh| {
+        let edges = crate::geometry::fold_edges(m);
+        let lengths = crate::geometry::edge_lengths(m, m.positions());
+        let length: f64 = edges.iter().map(|&e| lengths[e as usize]).sum();
+        (edges.len(), length)
+    };
+    let (folds_before, fold_length_before) = folds(input);
+    let (folds_after, fold_length_after) = folds(out);
     let (min_angle_before, min_angle_after) = (smallest(input), smallest(out));
     let mut warnings = Vec::new();
-    if folds_after > folds_before {
+    // New folds, by count and by length (a fold kept where it was, split by refinement,
+    // counts more edges but no more length; 10 % allows for its vertices moving a little).
+    if folds_after > folds_before && fold_length_after > 1.1 * fold_length_before {
         warnings.push(format!(
             "the output is crumpled: {folds_after} edges fold (their faces turn by more than \
              120°), the input's {folds_before}; look at mesh.glb before using it. A patch that \
@@ -108,6 +121,8 @@ pub fn check_shape(input: &Mesh, outcome: &JobOutcome) -> Option<ShapeCheck> {
     Some(ShapeCheck {
         folds_before,
         folds_after,
+        fold_length_before,
+        fold_length_after,
         min_angle_before,
         min_angle_after,
         warnings,
