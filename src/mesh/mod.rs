@@ -484,17 +484,20 @@ fn split_bow_ties(
         vertices.dedup();
         let shown: Vec<String> = split
             .iter()
-            .take(5)
+            .take(20)
             .map(|(v, c)| format!("{v} → {v} and {c}"))
             .collect();
         warnings.push(Warning::new(
             "bow_tie_vertices_split",
             format!(
                 "{} vertices where separate fans of faces met were split, one vertex per \
-                 fan at the same position ({}{})",
+                 fan at the same position ({}{}); the new vertices are {}..{}, in the order \
+                 of the vertices they copy",
                 vertices.len(),
                 shown.join(", "),
-                if split.len() > 5 { ", …" } else { "" }
+                if split.len() > 20 { ", …" } else { "" },
+                split[0].1,
+                split[split.len() - 1].1
             ),
         ));
     }
