@@ -491,7 +491,7 @@ fn split_bow_ties(
             "bow_tie_vertices_split",
             format!(
                 "{} vertices where separate fans of faces met were split, one vertex per \
-                 fan at the same position ({}{}); the new vertices are {}..{}, in the order \
+                 fan at the same position ({}{}); the new vertices are {} to {}, in the order \
                  of the vertices they copy",
                 vertices.len(),
                 shown.join(", "),
