@@ -467,11 +467,6 @@ pub fn measure(input: &Mesh, output: &Mesh) -> Measures {
     let (lo, hi) = input.bbox();
     let d = sub(hi, lo);
     let diag = dot(d, d).sqrt().max(f64::MIN_POSITIVE);
-    let min_angle = |m: &Mesh| {
-        geometry::min_corner_angles(m)
-            .into_iter()
-            .fold(PI, f64::min)
-    };
     let hd = crate::spatial::vertex_surface_hausdorff(
         output.positions(),
         output.triangles(),
@@ -491,8 +486,8 @@ pub fn measure(input: &Mesh, output: &Mesh) -> Measures {
         folds_out: geometry::fold_edges(output).len(),
         creases_in: geometry::crease_count(input),
         creases_out: geometry::crease_count(output),
-        min_angle_in: min_angle(input),
-        min_angle_out: min_angle(output),
+        min_angle_in: geometry::smallest_corner(input),
+        min_angle_out: geometry::smallest_corner(output),
         hausdorff_relative: hd / diag,
         max_move_relative: moved / diag,
     }

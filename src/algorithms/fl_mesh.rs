@@ -1215,19 +1215,12 @@ fn prefer_spare(out: Mesh, report: Report, spare: Option<Spare>) -> (Mesh, Repor
     }
 }
 
-/// The smallest corner angle of a mesh (π when it has none).
-fn smallest(m: &Mesh) -> f64 {
-    crate::geometry::min_corner_angles(m)
-        .into_iter()
-        .fold(PI, f64::min)
-}
-
 /// Whether `out` has no more folds than `input` and no corner below min(`min_angle`, the
 /// input's smallest): what a later run's result must keep to be taken.
 fn keeps_shape(input: &Mesh, out: &Mesh, params: &Params) -> bool {
-    let floor = smallest(input).min(params.min_angle.to_radians());
+    let floor = crate::geometry::smallest_corner(input).min(params.min_angle.to_radians());
     crate::geometry::fold_edges(out).len() <= crate::geometry::fold_edges(input).len()
-        && smallest(out) >= floor
+        && crate::geometry::smallest_corner(out) >= floor
 }
 
 /// A run from the developable cone over the boundary (the `cone` module) with at most
@@ -1274,7 +1267,7 @@ fn from_cone(
     }
     let folds_in = crate::geometry::fold_edges(mesh).len();
     let folds_out = crate::geometry::fold_edges(&out).len();
-    let floor = smallest(mesh).min(params.min_angle.to_radians());
+    let floor = crate::geometry::smallest_corner(mesh).min(params.min_angle.to_radians());
     let why = if !report.converged {
         let why = format!(
             "not flattenable from it (ϖ_max {:.2e}: {})",
@@ -1286,10 +1279,10 @@ fn from_cone(
         why
     } else if folds_out > folds_in {
         format!("flattenable from it, but with {folds_out} folds (input {folds_in})")
-    } else if smallest(&out) < floor {
+    } else if crate::geometry::smallest_corner(&out) < floor {
         format!(
             "flattenable from it, but with a corner of {:.2}° (floor {:.2}°)",
-            smallest(&out).to_degrees(),
+            crate::geometry::smallest_corner(&out).to_degrees(),
             floor.to_degrees()
         )
     } else {

@@ -344,6 +344,11 @@ pub fn min_corner_angles(mesh: &Mesh) -> Vec<f64> {
         .collect()
 }
 
+/// The smallest corner angle of the whole mesh, radians (π when it has no face).
+pub fn smallest_corner(mesh: &Mesh) -> f64 {
+    min_corner_angles(mesh).into_iter().fold(PI, f64::min)
+}
+
 /// Mean edge length (0 for a mesh without edges): the length scale of a mesh.
 pub fn mean_edge_length(mesh: &Mesh) -> f64 {
     let l = edge_lengths(mesh, mesh.positions());

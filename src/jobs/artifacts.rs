@@ -85,12 +85,7 @@ pub fn check_shape(input: &Mesh, outcome: &JobOutcome) -> Option<ShapeCheck> {
     if out.positions() == input.positions() {
         return None;
     }
-    let smallest = |m: &Mesh| {
-        crate::geometry::min_corner_angles(m)
-            .into_iter()
-            .fold(std::f64::consts::PI, f64::min)
-            .to_degrees()
-    };
+    let smallest = |m: &Mesh| crate::geometry::smallest_corner(m).to_degrees();
     let folds = |m: &Mesh| {
         let edges = crate::geometry::fold_edges(m);
         let lengths = crate::geometry::edge_lengths(m, m.positions());
