@@ -320,6 +320,10 @@ pub fn fold_edges(mesh: &Mesh) -> Vec<u32> {
         .collect()
 }
 
+/// A corner below this many degrees is a sliver: what optimisers may not create and the job
+/// report warns about.
+pub const SLIVER_DEGREES: f64 = 1.0;
+
 /// Adjacent face normals turning by more than this count as a crease (60°): short of a fold,
 /// but more than a smooth drape turns between neighbouring triangles.
 pub const CREASE_ANGLE: f64 = PI / 3.0;
@@ -346,7 +350,32 @@ pub fn min_corner_angles(mesh: &Mesh) -> Vec<f64> {
 
 /// The smallest corner angle of the whole mesh, radians (π when it has no face).
 pub fn smallest_corner(mesh: &Mesh) -> f64 {
-    min_corner_angles(mesh).into_iter().fold(PI, f64::min)
+    smallest_corner_at(mesh, mesh.positions())
+}
+
+/// [`smallest_corner`] of the mesh's faces placed at `pos` (an optimiser's iterate), without
+/// allocating.
+pub fn smallest_corner_at(mesh: &Mesh, pos: &[[f64; 3]]) -> f64 {
+    mesh.triangles().iter().fold(PI, |m, t| {
+        let [a, b, c] = t.map(|v| pos[v as usize]);
+        m.min(corner_angle(a, b, c))
+            .min(corner_angle(b, c, a))
+            .min(corner_angle(c, a, b))
+    })
+}
+
+/// How many of [`fold_edges`] the mesh's faces placed at `pos` have, without allocating.
+pub fn fold_count_at(mesh: &Mesh, pos: &[[f64; 3]]) -> usize {
+    let limit = FOLD_ANGLE.cos();
+    let normal = |f: u32| {
+        let [a, b, c] = mesh.triangles()[f as usize].map(|v| pos[v as usize]);
+        normalize(cross(sub(b, a), sub(c, a)))
+    };
+    mesh.conn()
+        .edge_faces()
+        .iter()
+        .filter(|f| f[1] != crate::mesh::NONE && dot(normal(f[0]), normal(f[1])) < limit)
+        .count()
 }
 
 /// Mean edge length (0 for a mesh without edges): the length scale of a mesh.

@@ -74,7 +74,7 @@ pub struct ShapeCheck {
 }
 
 /// Corners below this (degrees) that the input did not have are warned about.
-pub const SLIVER_DEGREES: f64 = 1.0;
+pub use crate::geometry::SLIVER_DEGREES;
 
 /// The [`ShapeCheck`] of a job whose output mesh is not its input's geometry (None for the
 /// others). A flattenable output can still be crumpled: measured on unseen whole garments
@@ -89,7 +89,8 @@ pub fn check_shape(input: &Mesh, outcome: &JobOutcome) -> Option<ShapeCheck> {
     let folds = |m: &Mesh| {
         let edges = crate::geometry::fold_edges(m);
         let lengths = crate::geometry::edge_lengths(m, m.positions());
-        let length: f64 = edges.iter().map(|&e| lengths[e as usize]).sum();
+        // fold, not sum: an empty f64 sum is −0.0, which the report would print.
+        let length = edges.iter().fold(0.0, |s, &e| s + lengths[e as usize]);
         (edges.len(), length)
     };
     let (folds_before, fold_length_before) = folds(input);

@@ -93,12 +93,12 @@ pub struct Params {
     pub cg_steps: usize,
     /// `sqp`: weight μ of Σ|v − v⁰|² beside E (both over h̄²).
     pub closeness: f64,
-    /// `sqp`: starting weight κ of the displacement's Dirichlet energy Σ_e |d_a − d_b|²
-    /// beside E (over h̄²), lowered to 0 by continuation once flattenable; 0: least stretch
+    /// `sqp`: weight κ of the displacement's Dirichlet energy Σ_e |d_a − d_b|² beside E
+    /// (over h̄²) until the mesh is first flattenable, 0 from there on; 0: least stretch
     /// throughout.
     pub smoothness: f64,
-    /// `sqp`: once flattenable, stop when a step moves no vertex more than this many mean
-    /// edge lengths.
+    /// `sqp`: once flattenable, stop when a step (times 1 + σ, its trust-region shortening)
+    /// moves no vertex more than this many mean edge lengths.
     pub step_tolerance: f64,
     /// `sqp`: iterations without g_max halving that end an unflattenable run.
     pub stall_iterations: usize,
