@@ -30,9 +30,8 @@
 use super::energy::{g_max, Model};
 use super::{Params, Run, Stop, Update};
 use crate::algorithms::{AlgoError, Control, Progress};
-use crate::geometry::{angle_sum_with, corner_angle_gradient};
+use crate::geometry::{corner_angle, corner_angle_gradient};
 use crate::mesh::{dot, Mesh};
-use std::f64::consts::TAU;
 
 /// Pops between progress reports and cancellation checks.
 const REPORT_EVERY: usize = 1024;
@@ -73,15 +72,15 @@ pub(super) fn run(
     }
     let mut scratch = Local::default();
     let mut pops = 0usize;
-    run.stop = loop {
+    let out_of_moves = loop {
         if pops >= params.max_moves {
-            break Stop::MaxMoves;
+            break true;
         }
         let Some((q, key)) = heap.peek() else {
-            break finish(&g, eps);
+            break false;
         };
         if key <= eps {
-            break finish(&g, eps);
+            break false;
         }
         pops += 1;
         if pops % REPORT_EVERY == 0 {
@@ -137,6 +136,13 @@ pub(super) fn run(
                 }
             }
         }
+    };
+    // g was kept by increments; the stop and the report read it afresh.
+    model.g(&pos, &mut g);
+    run.stop = if out_of_moves {
+        Stop::MaxMoves
+    } else {
+        finish(&g, eps)
     };
     run.inner = pops;
     run.iterations = pops;
@@ -215,7 +221,7 @@ fn step(
             change *= 0.5;
             continue;
         }
-        let t1 = s.evaluate(model, pos);
+        let t1 = s.evaluate(pos);
         // Armijo on T: a move must buy a decrease in proportion to its predicted one, else
         // ever smaller moves keep a vertex popping without getting anywhere.
         if update == Update::Newton
@@ -237,6 +243,17 @@ struct Local {
     g_before: Vec<f64>,
     g_after: Vec<f64>,
     slope: Vec<f64>,
+    /// q's fan: per triangle (q, b, c) the indices in `verts` of q, b and c (usize::MAX for
+    /// one whose g is not counted) and their corners before the move. Moving q changes only
+    /// these corners, so a trial updates g by their change: 3 corners per fan triangle
+    /// instead of every corner around q and its ring (atan2 was 68 % of a run).
+    fan: Vec<FanCorners>,
+}
+
+struct FanCorners {
+    verts: [u32; 3],
+    index: [usize; 3],
+    before: [f64; 3],
 }
 
 impl Local {
@@ -254,11 +271,22 @@ impl Local {
         self.slope.resize(self.verts.len(), 0.0);
         let index = |v: u32, verts: &[u32]| verts.iter().position(|&x| x == v);
         let pq = pos[q as usize];
+        self.fan.clear();
         for &hf in mesh.conn().fan_of(q) {
             let t = mesh.triangles()[hf as usize / 3];
             let k = hf as usize % 3;
             let (b, c) = (t[(k + 1) % 3], t[(k + 2) % 3]);
             let (pb, pc) = (pos[b as usize], pos[c as usize]);
+            let counted = |v: u32| {
+                index(v, &self.verts)
+                    .filter(|_| model.is_interior(v as usize))
+                    .unwrap_or(usize::MAX)
+            };
+            self.fan.push(FanCorners {
+                verts: [q, b, c],
+                index: [counted(q), counted(b), counted(c)],
+                before: corners(pq, pb, pc),
+            });
             // dθ/dq for the corners at q, at b (angle (b, c, q)) and at c (angle (c, q, b)).
             let (gb, gc) = corner_angle_gradient(pq, pb, pc);
             let at_q = [0, 1, 2].map(|i| -(gb[i] + gc[i]));
@@ -293,15 +321,20 @@ impl Local {
         (t, d)
     }
 
-    /// T at `pos` (q moved), filling `g_after`.
-    fn evaluate(&mut self, model: &Model<'_>, pos: &[[f64; 3]]) -> f64 {
-        let mesh = model.mesh();
-        for (k, &v) in self.verts.iter().enumerate() {
-            self.g_after[k] = if model.is_interior(v as usize) {
-                TAU - angle_sum_with(mesh, pos, v)
-            } else {
-                0.0
-            };
+    /// T at `pos` (q moved), filling `g_after`: g = 2π − θ falls by each corner's growth.
+    fn evaluate(&mut self, pos: &[[f64; 3]]) -> f64 {
+        self.g_after.copy_from_slice(&self.g_before);
+        for f in &self.fan {
+            let after = corners(
+                pos[f.verts[0] as usize],
+                pos[f.verts[1] as usize],
+                pos[f.verts[2] as usize],
+            );
+            for ((&i, a), b) in f.index.iter().zip(after).zip(f.before) {
+                if i != usize::MAX {
+                    self.g_after[i] -= a - b;
+                }
+            }
         }
         let t: f64 = self.g_after.iter().map(|x| x * x).sum();
         if t.is_finite() {
@@ -310,6 +343,15 @@ impl Local {
             f64::INFINITY
         }
     }
+}
+
+/// The corners of triangle (a, b, c) at a, b and c.
+fn corners(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> [f64; 3] {
+    [
+        corner_angle(a, b, c),
+        corner_angle(b, c, a),
+        corner_angle(c, a, b),
+    ]
 }
 
 /// (T, dT/dδ) for vertex `q` at positions `pos`, moving along `n`: T(δ) = g(q)² + Σ_j g(q_j)²
