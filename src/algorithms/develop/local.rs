@@ -71,6 +71,7 @@ pub(super) fn run(
         }
     }
     let mut scratch = Local::default();
+    let mut cache = face_corners(mesh, &pos);
     let mut pops = 0usize;
     let out_of_moves = loop {
         if pops >= params.max_moves {
@@ -97,7 +98,7 @@ pub(super) fn run(
         let qi = q as usize;
         let n = normals[qi];
         let moved = if delta_t > 0.0 && dot(n, n) > 0.0 {
-            scratch.load(model, &pos, q, n, &g);
+            scratch.load(model, &pos, q, n, &g, &cache);
             step(
                 model,
                 &mut pos,
@@ -122,6 +123,7 @@ pub(super) fn run(
         for (k, &v) in scratch.verts.iter().enumerate() {
             g[v as usize] = scratch.g_after[k];
         }
+        scratch.commit(&mut cache);
         for &v in &scratch.verts {
             for &p in std::iter::once(&v).chain(mesh.conn().ring_of(v)) {
                 let pi = p as usize;
@@ -244,20 +246,44 @@ struct Local {
     g_after: Vec<f64>,
     slope: Vec<f64>,
     /// q's fan: per triangle (q, b, c) the indices in `verts` of q, b and c (usize::MAX for
-    /// one whose g is not counted) and their corners before the move. Moving q changes only
-    /// these corners, so a trial updates g by their change: 3 corners per fan triangle
-    /// instead of every corner around q and its ring (atan2 was 68 % of a run).
+    /// one whose g is not counted) and their corners before and after the move. Moving q
+    /// changes only these corners, so a trial updates g by their change: 3 corners per fan
+    /// triangle instead of every corner around q and its ring (atan2 was 68 % of a run), and
+    /// the corners before come from the run's per-face cache.
     fan: Vec<FanCorners>,
 }
 
 struct FanCorners {
     verts: [u32; 3],
     index: [usize; 3],
+    face: usize,
+    /// Where q is in the face's corner order.
+    k: usize,
     before: [f64; 3],
+    after: [f64; 3],
+}
+
+/// Every face's three corners, in its vertex order, at `pos`.
+fn face_corners(mesh: &Mesh, pos: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    mesh.triangles()
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|v| pos[v as usize]);
+            corners(a, b, c)
+        })
+        .collect()
 }
 
 impl Local {
-    fn load(&mut self, model: &Model<'_>, pos: &[[f64; 3]], q: u32, n: [f64; 3], g: &[f64]) {
+    fn load(
+        &mut self,
+        model: &Model<'_>,
+        pos: &[[f64; 3]],
+        q: u32,
+        n: [f64; 3],
+        g: &[f64],
+        cache: &[[f64; 3]],
+    ) {
         let mesh = model.mesh();
         self.verts.clear();
         self.verts.push(q);
@@ -285,7 +311,10 @@ impl Local {
             self.fan.push(FanCorners {
                 verts: [q, b, c],
                 index: [counted(q), counted(b), counted(c)],
-                before: corners(pq, pb, pc),
+                face: hf as usize / 3,
+                k,
+                before: [0, 1, 2].map(|x| cache[hf as usize / 3][(k + x) % 3]),
+                after: [0.0; 3],
             });
             // dθ/dq for the corners at q, at b (angle (b, c, q)) and at c (angle (c, q, b)).
             let (gb, gc) = corner_angle_gradient(pq, pb, pc);
@@ -321,16 +350,25 @@ impl Local {
         (t, d)
     }
 
+    /// The accepted move's corners into the per-face cache.
+    fn commit(&self, cache: &mut [[f64; 3]]) {
+        for f in &self.fan {
+            for x in 0..3 {
+                cache[f.face][(f.k + x) % 3] = f.after[x];
+            }
+        }
+    }
+
     /// T at `pos` (q moved), filling `g_after`: g = 2π − θ falls by each corner's growth.
     fn evaluate(&mut self, pos: &[[f64; 3]]) -> f64 {
         self.g_after.copy_from_slice(&self.g_before);
-        for f in &self.fan {
-            let after = corners(
+        for f in self.fan.iter_mut() {
+            f.after = corners(
                 pos[f.verts[0] as usize],
                 pos[f.verts[1] as usize],
                 pos[f.verts[2] as usize],
             );
-            for ((&i, a), b) in f.index.iter().zip(after).zip(f.before) {
+            for ((&i, a), b) in f.index.iter().zip(f.after).zip(f.before) {
                 if i != usize::MAX {
                     self.g_after[i] -= a - b;
                 }
@@ -360,7 +398,7 @@ pub fn t_and_slope(model: &Model<'_>, pos: &[[f64; 3]], q: u32, n: [f64; 3]) -> 
     let mut g = vec![0.0; pos.len()];
     model.g(pos, &mut g);
     let mut s = Local::default();
-    s.load(model, pos, q, n, &g);
+    s.load(model, pos, q, n, &g, &face_corners(model.mesh(), pos));
     s.t_and_slope()
 }
 
