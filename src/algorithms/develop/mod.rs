@@ -94,8 +94,8 @@ pub struct Params {
     /// `sqp`: weight μ of Σ|v − v⁰|² beside E (both over h̄²).
     pub closeness: f64,
     /// `sqp`: weight κ of the displacement's Dirichlet energy Σ_e |d_a − d_b|² beside E
-    /// (over h̄²) until the mesh is first flattenable, 0 from there on; 0: least stretch
-    /// throughout.
+    /// (over h̄²) until the mesh is flattenable and stationary, 0 from there on; 0: least
+    /// stretch throughout.
     pub smoothness: f64,
     /// `sqp`: once flattenable, stop when a step (times 1 + σ, its trust-region shortening)
     /// moves no vertex more than this many mean edge lengths.
@@ -217,7 +217,8 @@ impl Params {
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Stop {
-    /// g_max within the tolerance (`sqp`: and the step below `step_tolerance`).
+    /// g_max within the tolerance (`sqp`: and stationary: the step below `step_tolerance`,
+    /// the trust region shut, or the objective no longer falling).
     #[default]
     Tolerance,
     /// `penalty_cg`: the relative change of G fell below η.

@@ -7,14 +7,14 @@
 //! `closeness` (default 1e-2): E alone is blind to rigid motions and to every isometric
 //! bending, so its Hessian is singular; the small pull to the input picks, among the
 //! minimum-deformation answers, the one nearest the input. κ, the Dirichlet energy of the
-//! displacement on the same edge pattern, is `smoothness` (default 10) until the run is first
-//! flattenable, and 0 from there on (from the best flattenable iterate), so the answer is that
-//! of min E + μ closeness. Why: θ depends on edge lengths only, so the least-stretch step
+//! displacement on the same edge pattern, is `smoothness` (default 10) until the run is
+//! flattenable and stationary, then 0 (from the best flattenable iterate) until it is
+//! stationary again, so the answer is that of min E + μ closeness. Why: θ depends on edge lengths only, so the least-stretch step
 //! (κ = 0) concentrates the change and makes θ's linearisation poor, and a garment's total
 //! angle defect must be carried to its boundary (Gauss–Bonnet), which damped least-stretch
 //! steps do like a slow diffusion; smooth steps carry it. Measured on the 22 open shared
 //! meshes (issue 16 note): converged 5 with κ = 0 throughout (the t-shirt stalls at 2.0e-2,
-//! δS 2.9 %), 9 with κ⁰ = 10 (the t-shirt 9.4e-7 with δS 9.9 %, gf_dress, pf_try3,
+//! δS 2.9 %), 9 with κ = 10 (the t-shirt 9.4e-7 with δS 9.9 %, gf_dress, pf_try3,
 //! bff_hemisphere newly). `smoothness = 0` is the least-stretch model throughout.
 //!
 //! Each iteration solves the KKT system
@@ -43,16 +43,16 @@
 //! trust region (σ ÷ 3 after a taken step, × 4 after a refused one), λ is off so the
 //! constraint rows are exact, and the trial δ_n + δ_t is pulled back onto the constraints by
 //! up to four corrections (re-solves with the same factorisation against the residual at the
-//! trial); it is taken when it is flattenable, lowers f and keeps the shape (no corner below
-//! 1° or below the smallest the input or the first flattenable iterate had, no more folds;
-//! `ShapeFloor`). While not flattenable, up to four such corrections follow a taken step
+//! trial); it is taken when it is flattenable, lowers f and keeps the shape (the smallest
+//! corner of the mesh stays at 1° or above, or at the smallest the input or the first
+//! flattenable iterate had if lower, and the count of folds does not grow; `ShapeFloor`). While not flattenable, up to four such corrections follow a taken step
 //! as long as each quarters Σ(2π − θ)². Trials that make a triangle degenerate are refused.
 //! The objective phase replaced (issue 16 note, 2026-11-26) a step weight w halved after
 //! each refusal with λ left where restoration ended and κ lowered ÷ 10 at each stationary
 //! point: E's Gauss–Newton Hessian ignores the constraints' curvature, so the undamped step
 //! was 10–70 h̄ long and only w ≈ 2e-3 of it was taken; w never grew back, λ = 1e-4 kept the
 //! corrections from closing the residual, and each κ stage ended after ten refusals without
-//! a step. On the 12 flattenable open shared meshes: t-shirt 3.2 s → 1.3 s, 200 → 69
+//! a step (now κ goes from `smoothness` straight to 0). On the 12 flattenable open shared meshes: t-shirt 3.2 s → 1.3 s, 200 → 69
 //! iterations, δS 9.89 → 9.91 %, folds 17 → 10, smallest corner 0.08° → 1.9°; δS lower on 6
 //! (gf_skirt_3D_0 2.07 → 1.90 %, gc_tee_sim 16.8 → 13.1 %), higher on 3 (mh_female_sportsuit01
 //! 21.7 → 26.8 %, mh_classicshoes_medium 10.1 → 12.4 %, gf_shirtfront 8.86 → 9.04 %) where
@@ -217,6 +217,7 @@ pub(super) fn run(
         // On the constraints: H + σI (the objective's trust region) and the exact constraint
         // rows (λ, which shortens the normal step while restoring, would keep the corrections
         // from closing the residual).
+        // σI enters H as its 2μ I does (f's closeness term), hence μ + σ/2.
         let (sigma_now, damping_now) = if feasible_now {
             (sigma, DAMPING_MIN)
         } else {
@@ -293,11 +294,6 @@ pub(super) fn run(
                     && shape_floor
                         .as_ref()
                         .is_none_or(|floor| floor.kept(model.mesh(), &trial));
-                sigma = if ok {
-                    (sigma / 3.0).max(SIGMA_MIN)
-                } else {
-                    4.0 * sigma
-                };
                 ok
             }
             Some(_) => {
@@ -338,12 +334,19 @@ pub(super) fn run(
                     _ => break,
                 }
             }
-        } else {
+        } else if !feasible_now {
             weight *= 0.5;
-            if !feasible_now {
-                damping *= growth;
-                growth *= 2.0;
-            }
+            damping *= growth;
+            growth *= 2.0;
+        }
+        if feasible_now {
+            // The trust region, after any refusal (a degenerate trial too, which would
+            // otherwise be built again from the same system).
+            sigma = if accepted {
+                (sigma / 3.0).max(SIGMA_MIN)
+            } else {
+                4.0 * sigma
+            };
         }
         let gm = g_max(&g);
         run.history.push(HistoryEntry {
@@ -354,7 +357,7 @@ pub(super) fn run(
             rho: None,
             cg_steps: None,
             step_length: Some(if accepted { w } else { 0.0 }),
-            damping: Some(damping),
+            damping: Some(damping_now),
         });
         control.progress(&Progress {
             stage: "sqp".into(),
@@ -384,14 +387,14 @@ pub(super) fn run(
         let mut stationary = false;
         if feasible_now {
             let slot = objective_its % CREEP_WINDOW;
-            let creeping = objective_its >= CREEP_WINDOW && f_ring[slot] - f < CREEP * f.abs();
+            let creeping = objective_its >= CREEP_WINDOW && f_ring[slot] - f < CREEP * f;
             f_ring[slot] = f;
             objective_its += 1;
             stationary = creeping
                 || sigma > SIGMA_MAX
                 || (accepted && step_max * (1.0 + sigma_now) <= params.step_tolerance);
         }
-        if feasible && stationary {
+        if stationary {
             if kappa == 0.0 {
                 run.stop = Stop::Tolerance;
                 break;
