@@ -36,23 +36,9 @@ fn delta_s(input: &Mesh, output: &Mesh) -> f64 {
 }
 
 fn main() {
-    let mut filter = String::new();
-    let mut params = serde_json::Map::new();
-    let mut shared = true;
-    let mut args = std::env::args().skip(1);
-    while let Some(a) = args.next() {
-        if a == "--set" {
-            let kv = args.next().expect("--set KEY=VALUE");
-            let (k, v) = kv.split_once('=').expect("KEY=VALUE");
-            let v = serde_json::from_str(v).unwrap_or(serde_json::Value::String(v.into()));
-            params.insert(k.into(), v);
-        } else if a == "--no-shared" {
-            shared = false;
-        } else {
-            filter = a;
-        }
-    }
-    let params: develop::Params = parse_params(&params).expect("parameters");
+    let args = corpus::ExampleArgs::parse(std::env::args().skip(1)).expect("arguments");
+    let (filter, shared) = (args.filter, args.shared);
+    let params: develop::Params = parse_params(&args.params).expect("parameters");
     let root = Path::new(corpus::SHARED_MESHES);
     let closed: Vec<String> = corpus::shared_closed_meshes(root)
         .unwrap_or_default()

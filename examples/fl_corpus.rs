@@ -11,22 +11,12 @@ use flatmesh::corpus;
 use std::path::Path;
 
 fn main() {
-    let mut filter = String::new();
-    let mut params = serde_json::Map::new();
-    let mut shared = true;
-    let mut args = std::env::args().skip(1);
-    while let Some(a) = args.next() {
-        if a == "--set" {
-            let kv = args.next().expect("--set KEY=VALUE");
-            let (k, v) = kv.split_once('=').expect("KEY=VALUE");
-            let v = serde_json::from_str(v).unwrap_or(serde_json::Value::String(v.into()));
-            params.insert(k.into(), v);
-        } else if a == "--no-shared" {
-            shared = false;
-        } else {
-            filter = a;
-        }
-    }
-    let params: fl_mesh::Params = parse_params(&params).expect("parameters");
-    corpus::print_table(Path::new(corpus::SHARED_MESHES), shared, &filter, &params);
+    let args = corpus::ExampleArgs::parse(std::env::args().skip(1)).expect("arguments");
+    let params: fl_mesh::Params = parse_params(&args.params).expect("parameters");
+    corpus::print_table(
+        Path::new(corpus::SHARED_MESHES),
+        args.shared,
+        &args.filter,
+        &params,
+    );
 }

@@ -669,6 +669,42 @@ pub fn print_table(
     println!("{conv} of {total} reached ϖ_max ≤ {:e}", params.tolerance);
 }
 
+/// What the corpus examples take: `[FILTER] [--set KEY=VALUE ...] [--no-shared]`.
+pub struct ExampleArgs {
+    /// Keep the cases whose name contains it.
+    pub filter: String,
+    /// The job's parameters as JSON values (a VALUE that is not JSON is a string).
+    pub params: serde_json::Map<String, serde_json::Value>,
+    /// Whether the meshes of `../shared/meshes` are in.
+    pub shared: bool,
+}
+
+impl ExampleArgs {
+    /// From the program's arguments (without the program's name).
+    pub fn parse(mut args: impl Iterator<Item = String>) -> Result<Self, String> {
+        let mut out = Self {
+            filter: String::new(),
+            params: serde_json::Map::new(),
+            shared: true,
+        };
+        while let Some(a) = args.next() {
+            if a == "--set" {
+                let kv = args.next().ok_or("--set needs KEY=VALUE")?;
+                let (k, v) = kv
+                    .split_once('=')
+                    .ok_or_else(|| format!("--set {kv}: not KEY=VALUE"))?;
+                let v = serde_json::from_str(v).unwrap_or(serde_json::Value::String(v.into()));
+                out.params.insert(k.into(), v);
+            } else if a == "--no-shared" {
+                out.shared = false;
+            } else {
+                out.filter = a;
+            }
+        }
+        Ok(out)
+    }
+}
+
 /// Figures of a flat pattern recomputed from its 2D and 3D positions alone, for tests,
 /// examples and benchmarks to judge patterns without the flatten module's own measures.
 pub mod pattern_checks {
