@@ -1,21 +1,21 @@
-//! `solver = "sqp"` (the default, beyond the paper; paper-notes B.8 (c)): Eq. 8 itself,
-//! min E subject to θ_i = 2π at every interior vertex, by sequential quadratic programming
-//! instead of a penalty, so that the answer is exactly flattenable (g_max ≤ 1e-6) where the
-//! paper's penalty runs all stall near 1e-3 (its Table 1).
+//! `solver = "sqp"` (the default, beyond the paper; paper-notes B.8 (c)): Eq. 8 itself, min E
+//! subject to θ_i = 2π at every interior vertex, by sequential quadratic programming instead of
+//! a penalty, so that the answer is exactly flattenable (g_max ≤ 1e-6) where the paper's
+//! penalty runs all stall near 1e-3 (its Table 1).
 //!
-//! Objective f = (E + μ Σ_v |v − v⁰|² + κ Σ_e |d_a − d_b|²) / h̄², d = v − v⁰, μ =
-//! `closeness` (default 1e-2): E alone is blind to rigid motions and to every isometric
-//! bending, so its Hessian is singular; the small pull to the input picks, among the
-//! minimum-deformation answers, the one nearest the input. κ, the Dirichlet energy of the
-//! displacement on the same edge pattern, is `smoothness` (default 10) until the run is
-//! flattenable and stationary, then 0 (from the best flattenable iterate) until it is
-//! stationary again, so the answer is that of min E + μ closeness. Why: θ depends on edge lengths only, so the least-stretch step
-//! (κ = 0) concentrates the change and makes θ's linearisation poor, and a garment's total
-//! angle defect must be carried to its boundary (Gauss–Bonnet), which damped least-stretch
-//! steps do like a slow diffusion; smooth steps carry it. Measured on the 22 open shared
-//! meshes (issue 16 note): converged 5 with κ = 0 throughout (the t-shirt stalls at 2.0e-2,
-//! δS 2.9 %), 9 with κ = 10 (the t-shirt 9.4e-7 with δS 9.9 %, gf_dress, pf_try3,
-//! bff_hemisphere newly). `smoothness = 0` is the least-stretch model throughout.
+//! Objective f = (E + μ Σ_v |v − v⁰|² + κ Σ_e |d_a − d_b|²) / h̄², d = v − v⁰, μ = `closeness`
+//! (default 1e-2): E alone is blind to rigid motions and to every isometric bending, so its
+//! Hessian is singular; the small pull to the input picks, among the minimum-deformation
+//! answers, the one nearest the input. κ, the Dirichlet energy of the displacement on the same
+//! edge pattern, is `smoothness` (default 10) until the run is flattenable and stationary, then
+//! 0 (from the best flattenable iterate) until it is stationary again, so the answer is that of
+//! min E + μ closeness. Why: θ depends on edge lengths only, so the least-stretch step (κ = 0)
+//! concentrates the change and makes θ's linearisation poor, and a garment's total angle defect
+//! must be carried to its boundary (Gauss–Bonnet), which damped least-stretch steps do like a
+//! slow diffusion; smooth steps carry it. Measured on the 22 open shared meshes (issue 16
+//! note): converged 5 with κ = 0 throughout (the t-shirt stalls at 2.0e-2, δS 2.9 %), 9 with
+//! κ = 10 (the t-shirt 9.4e-7 with δS 9.9 %, gf_dress, pf_try3, bff_hemisphere newly).
+//! `smoothness = 0` is the least-stretch model throughout.
 //!
 //! Each iteration solves the KKT system
 //!
@@ -25,53 +25,52 @@
 //! ```
 //!
 //! with H the Gauss–Newton Hessian of f (2 u uᵀ per edge, u its unit direction, plus 2μ I and
-//! κ's graph Laplacian), the (2,2) block −(ε + λ)I with the damping λ below, and
-//! Λ = ∂θ/∂v (FL Props. 1–2), in units of h̄ so that all blocks are O(1). The pattern is fixed,
-//! so the symbolic factorisation (AMD on the vertex graph, a vertex's x, y, z and y kept
-//! together) is computed once and only the numeric LDLᵀ every iteration.
+//! κ's graph Laplacian), the (2,2) block −(ε + λ)I with the damping λ below, and Λ = ∂θ/∂v (FL
+//! Props. 1–2), in units of h̄ so that all blocks are O(1). The pattern is fixed, so the
+//! symbolic factorisation (AMD on the vertex graph, a vertex's x, y, z and y kept together) is
+//! computed once and only the numeric LDLᵀ every iteration.
 //!
 //! Globalisation, as fl-mesh's (feasibility first, the objective shaping the step): one
 //! factorisation, two solves, a normal step δ_n for [0; 2π − θ] (the least-H-norm step, i.e.
-//! the least deformation, that the linearised constraints ask for) and a tangential one δ_t
-//! for [−∇f; 0]; the trial is δ_n + w δ_t. While not flattenable, a trial is taken when
-//! Σ(2π − θ)² falls by at least 1e-4 of the fall its linearisation predicts, and the
-//! Levenberg–Marquardt damping λ in the (2,2) block, −(ε + λ)I, follows Nielsen's rule on
-//! that ratio (a large λ shortens the normal step where θ's linearisation is poor); w is
-//! halved after a refused trial, doubled after a good one, and cut further when δ_t would
-//! spoil more than half the predicted fall (with λ > 0 it is not exactly tangent). Once
-//! flattenable (the objective phase), the (1,1) block is H + σI, a Levenberg–Marquardt
-//! trust region (σ ÷ 3 after a taken step, × 4 after a refused one), λ is off so the
-//! constraint rows are exact, and the trial δ_n + δ_t is pulled back onto the constraints by
-//! up to four corrections (re-solves with the same factorisation against the residual at the
-//! trial); it is taken when it is flattenable, lowers f and keeps the shape (the smallest
-//! corner of the mesh stays at 1° or above, or at the smallest the input or the first
-//! flattenable iterate had if lower, and the count of folds does not grow; `ShapeFloor`). While not flattenable, up to four such corrections follow a taken step
-//! as long as each quarters Σ(2π − θ)². Trials that make a triangle degenerate are refused.
-//! The objective phase replaced (issue 16 note, 2026-11-26) a step weight w halved after
-//! each refusal with λ left where restoration ended and κ lowered ÷ 10 at each stationary
-//! point: E's Gauss–Newton Hessian ignores the constraints' curvature, so the undamped step
-//! was 10–70 h̄ long and only w ≈ 2e-3 of it was taken; w never grew back, λ = 1e-4 kept the
-//! corrections from closing the residual, and each κ stage ended after ten refusals without
-//! a step (now κ goes from `smoothness` straight to 0). On the 12 flattenable open shared meshes: t-shirt 3.2 s → 1.3 s, 200 → 69
-//! iterations, δS 9.89 → 9.91 %, folds 17 → 10, smallest corner 0.08° → 1.9°; δS lower on 6
-//! (gf_skirt_3D_0 2.07 → 1.90 %, gc_tee_sim 16.8 → 13.1 %), higher on 3 (mh_female_sportsuit01
-//! 21.7 → 26.8 %, mh_classicshoes_medium 10.1 → 12.4 %, gf_shirtfront 8.86 → 9.04 %) where
-//! the old run had bought its stretch with corners of 0.00–0.04°.
-//! Measured with κ = 0 against the first version (ℓ1 merit with Armijo
-//! backtracking and λ on H's diagonal, issue 16 note): on the t-shirt g_max 6.2e-3 with
-//! δS 14 % became 2.0e-2 with δS 2.9 %; on mh_shoes01 0.48 → 0.037; gf_dress 0.127 (no step
-//! taken) → 4.6e-3. Neither converges yet on most real garments (they stall with every
-//! interior vertex at a similar g: a local minimum of Σ(2π − θ)² that fl-mesh leaves by
-//! refinement and non-monotone steps).
+//! the least deformation, that the linearised constraints ask for) and a tangential one δ_t for
+//! [−∇f; 0]; the trial is δ_n + w δ_t. While not flattenable, a trial is taken when Σ(2π − θ)²
+//! falls by at least 1e-4 of the fall its linearisation predicts, and the Levenberg–Marquardt
+//! damping λ in the (2,2) block, −(ε + λ)I, follows Nielsen's rule on that ratio (a large λ
+//! shortens the normal step where θ's linearisation is poor); w is halved after a refused
+//! trial, doubled after a good one, and cut further when δ_t would spoil more than half the
+//! predicted fall (with λ > 0 it is not exactly tangent). Once flattenable (the objective
+//! phase), the (1,1) block is H + σI, a Levenberg–Marquardt trust region (σ ÷ 3 after a taken
+//! step, × 4 after a refused one), λ is off so the constraint rows are exact, and the trial
+//! δ_n + δ_t is pulled back onto the constraints by up to four corrections (re-solves with the same
+//! factorisation against the residual at the trial); it is taken when it is flattenable, lowers
+//! f and keeps the shape (the smallest corner of the mesh stays at 1° or above, or at the
+//! smallest the input or the first flattenable iterate had if lower, and the count of folds
+//! does not grow; `ShapeFloor`). While not flattenable, up to four such corrections follow a
+//! taken step as long as each quarters Σ(2π − θ)². Trials that make a triangle degenerate are
+//! refused. The objective phase replaced (issue 16 note, 2026-11-26) a step weight w halved
+//! after each refusal with λ left where restoration ended and κ lowered ÷ 10 at each stationary
+//! point: E's Gauss–Newton Hessian ignores the constraints' curvature, so the undamped step was
+//! 10–70 h̄ long and only w ≈ 2e-3 of it was taken; w never grew back, λ = 1e-4 kept the
+//! corrections from closing the residual, and each κ stage ended after ten refusals without a
+//! step (now κ goes from `smoothness` straight to 0). On the 12 flattenable open shared meshes:
+//! t-shirt 3.2 s → 1.3 s, 200 → 69 iterations, δS 9.89 → 9.91 %, folds 17 → 10, smallest corner
+//! 0.08° → 1.9°; δS lower on 6 (gf_skirt_3D_0 2.07 → 1.90 %, gc_tee_sim 16.8 → 13.1 %), higher
+//! on 3 (mh_female_sportsuit01 21.7 → 26.8 %, mh_classicshoes_medium 10.1 → 12.4 %,
+//! gf_shirtfront 8.86 → 9.04 %) where the old run had bought its stretch with corners of
+//! 0.00–0.04°. Measured with κ = 0 against the first version (ℓ1 merit with Armijo backtracking
+//! and λ on H's diagonal, issue 16 note): on the t-shirt g_max 6.2e-3 with δS 14 % became
+//! 2.0e-2 with δS 2.9 %; on mh_shoes01 0.48 → 0.037; gf_dress 0.127 (no step taken) → 4.6e-3.
+//! Neither converges yet on most real garments (they stall with every interior vertex at a
+//! similar g: a local minimum of Σ(2π − θ)² that fl-mesh leaves by refinement and non-monotone
+//! steps).
 //!
-//! Stop: converged when g_max ≤ `tolerance`, κ = 0 and the run is stationary: σ has passed
-//! 1e6, the step (times 1 + σ, the shortening σ causes) is below `step_tolerance` h̄, or f fell
-//! by less than 0.1 % over the last ten iterations (a stationary point of Eq. 8 for practical
+//! Stop: converged when g_max ≤ `tolerance`, κ = 0 and the run is stationary: σ has passed 1e6,
+//! the step (times 1 + σ, the shortening σ causes) is below `step_tolerance` h̄, or f fell by
+//! less than 0.1 % over the last ten iterations (a stationary point of Eq. 8 for practical
 //! purposes, not just the first flattenable iterate; a run that is flattenable but not there
-//! yet says so in its detail);
-//! `stall` when g_max has not halved in `stall_iterations`; `line_search` when λ passes 1e8.
-//! The best iterate is returned: the feasible one with the least f, else the one with the
-//! least g_max.
+//! yet says so in its detail); `stall` when g_max has not halved in `stall_iterations`;
+//! `line_search` when λ passes 1e8. The best iterate is returned: the feasible one with the
+//! least f, else the one with the least g_max.
 
 // Index loops over xyz read like the equations they implement.
 #![allow(clippy::needless_range_loop)]
@@ -289,12 +288,11 @@ pub(super) fn run(
                         None => break,
                     }
                 }
-                let ok = g_max(&trial_g) <= tol
+                g_max(&trial_g) <= tol
                     && trial_f.is_some_and(|ft| ft < f)
                     && shape_floor
                         .as_ref()
-                        .is_none_or(|floor| floor.kept(model.mesh(), &trial));
-                ok
+                        .is_none_or(|floor| floor.kept(model.mesh(), &trial))
             }
             Some(_) => {
                 // Levenberg–Marquardt ratio of the actual to the predicted fall of Σ(2π − θ)².
