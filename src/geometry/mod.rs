@@ -308,16 +308,23 @@ pub const FOLD_ANGLE: f64 = 2.0 * PI / 3.0;
 /// Edges with two faces whose unit normals turn by more than [`FOLD_ANGLE`] (seams included:
 /// a fold across a seam is still a fold).
 pub fn fold_edges(mesh: &Mesh) -> Vec<u32> {
-    let fnrm = face_normals(mesh);
+    fold_edges_at(mesh, mesh.positions()).collect()
+}
+
+/// [`fold_edges`] of the mesh's faces placed at `pos` (an optimiser's iterate), without
+/// allocating.
+pub fn fold_edges_at<'a>(mesh: &'a Mesh, pos: &'a [[f64; 3]]) -> impl Iterator<Item = u32> + 'a {
     let limit = FOLD_ANGLE.cos();
+    let normal = move |f: u32| {
+        let [a, b, c] = mesh.triangles()[f as usize].map(|v| pos[v as usize]);
+        normalize(cross(sub(b, a), sub(c, a)))
+    };
     mesh.conn()
         .edge_faces()
         .iter()
         .enumerate()
-        .filter(|(_, f)| f[1] != crate::mesh::NONE)
-        .filter(|(_, f)| dot(fnrm[f[0] as usize], fnrm[f[1] as usize]) < limit)
+        .filter(move |(_, f)| f[1] != crate::mesh::NONE && dot(normal(f[0]), normal(f[1])) < limit)
         .map(|(e, _)| e as u32)
-        .collect()
 }
 
 /// A corner below this many degrees is a sliver: what optimisers may not create and the job
@@ -366,16 +373,7 @@ pub fn smallest_corner_at(mesh: &Mesh, pos: &[[f64; 3]]) -> f64 {
 
 /// How many of [`fold_edges`] the mesh's faces placed at `pos` have, without allocating.
 pub fn fold_count_at(mesh: &Mesh, pos: &[[f64; 3]]) -> usize {
-    let limit = FOLD_ANGLE.cos();
-    let normal = |f: u32| {
-        let [a, b, c] = mesh.triangles()[f as usize].map(|v| pos[v as usize]);
-        normalize(cross(sub(b, a), sub(c, a)))
-    };
-    mesh.conn()
-        .edge_faces()
-        .iter()
-        .filter(|f| f[1] != crate::mesh::NONE && dot(normal(f[0]), normal(f[1])) < limit)
-        .count()
+    fold_edges_at(mesh, pos).count()
 }
 
 /// Mean edge length (0 for a mesh without edges): the length scale of a mesh.
