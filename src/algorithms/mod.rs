@@ -11,6 +11,7 @@ pub mod perturb;
 pub mod report_job;
 pub mod segment;
 pub mod subdivide;
+pub mod unfold;
 
 use crate::mesh::Mesh;
 use serde::de::DeserializeOwned;

@@ -118,6 +118,10 @@ pub struct Params {
     pub levels: usize,
     /// Tolerances (radians) at which D[M] is reported.
     pub d_tolerance: Vec<f64>,
+    /// `sqp`: open the folds of a flattenable result that the start did not have (edges whose
+    /// normals turn past 120°), moving their neighbourhoods along θ = 2π (the `unfold`
+    /// module; beyond the papers).
+    pub unfold: bool,
 }
 
 impl Default for Params {
@@ -141,6 +145,7 @@ impl Default for Params {
             relaxation: 1.8,
             levels: 1,
             d_tolerance: vec![1e-6, 1e-4, 1e-3, 1e-2],
+            unfold: true,
         }
     }
 }
@@ -403,6 +408,10 @@ pub struct Summary {
     pub history: Vec<HistoryEntry>,
     /// `loop`: Su et al.'s Table 1.
     pub table: Option<LoopTable>,
+    /// `sqp` with `unfold`, when the result had folds the start did not: what opening them
+    /// did (fold counts of the whole mesh).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub unfold: Option<super::unfold::Summary>,
 }
 
 /// δD of Su et al.'s Table 1, percent: (D[M_R] − D[M_L]) / D[M_L] × 100; None when D[M_L] = 0.
@@ -517,16 +526,72 @@ pub fn run(
         }
         (_, Solver::PenaltyCg) => cg::run(&model, start.positions(), &movable, params, control)?,
     };
-    let out = start
+    let mut out = start
         .with_positions(run.positions.clone())
         .map_err(|e| AlgoError::Input(format!("the optimised mesh is invalid: {e}")))?;
-    let summary = summarise(mesh, &levels, &start, &out, &model, &run, params);
+    let mut unfolded = None;
+    if params.unfold && params.method != Method::Local && params.solver == Solver::Sqp {
+        if let Some((m, u)) = open_new_folds(&start, &out, &model, &movable, params, control)? {
+            out = m;
+            unfolded = Some(u);
+        }
+    }
+    let mut summary = summarise(mesh, &levels, &start, &out, &model, &run, params);
+    summary.unfold = unfolded;
     Ok(Outcome {
         mesh: Some(out),
         patterns: None,
         summary,
         levels,
     })
+}
+
+/// The folds of a flattenable `out` that `start` did not have, opened where that keeps every
+/// constrained vertex within the tolerance ([`super::unfold::unfold`]); None when there were
+/// none, or the result is not flattenable (the unfolding keeps each vertex where it was, but
+/// a stalled run's answer is the best iterate, which is left as it is).
+fn open_new_folds(
+    start: &Mesh,
+    out: &Mesh,
+    model: &Model<'_>,
+    movable: &[bool],
+    params: &Params,
+    control: &dyn Control,
+) -> Result<Option<(Mesh, super::unfold::Summary)>, AlgoError> {
+    let tol = params.tolerance();
+    let constrained: Vec<bool> = (0..start.num_vertices())
+        .map(|v| model.is_interior(v))
+        .collect();
+    let theta = crate::geometry::angle_sums(out);
+    let g_max = (0..start.num_vertices())
+        .filter(|&v| constrained[v])
+        .map(|v| (std::f64::consts::TAU - theta[v]).abs())
+        .fold(0.0, f64::max);
+    if g_max > tol {
+        return Ok(None);
+    }
+    let old: std::collections::HashSet<u32> =
+        crate::geometry::fold_edges(start).into_iter().collect();
+    let targets: Vec<u32> = crate::geometry::fold_edges(out)
+        .into_iter()
+        .filter(|e| !old.contains(e))
+        .collect();
+    if targets.is_empty() {
+        return Ok(None);
+    }
+    let done = super::unfold::unfold(
+        out,
+        out.positions(),
+        &targets,
+        movable,
+        &constrained,
+        tol,
+        control,
+    )?;
+    Ok(out
+        .with_positions(done.positions)
+        .ok()
+        .map(|m| (m, done.summary)))
 }
 
 /// The feasibility restoration after an `sqp` run that stalled unflattenable (beyond the
@@ -557,6 +622,8 @@ fn restore(
     let fl = fl_mesh::Params {
         refine: false,
         tolerance: tol,
+        // The objective phase moves on from here; its own shape floor keeps the folds.
+        unfold: false,
         ..fl_mesh::Params::default()
     };
     let said = |first: &Run| {
@@ -752,5 +819,6 @@ fn summarise(
         impossible_vertices: impossible,
         history: run.history.clone(),
         table,
+        unfold: None,
     }
 }

@@ -1,0 +1,783 @@
+//! Opening the folds an optimiser left in a flattenable mesh without losing flattenability
+//! (issue 12: "no output has more folds than its input").
+//!
+//! fl-mesh and develop reach θ = 2π by normal steps that, on whole garments, concentrate the
+//! change into a few isolated hinges turning past 120° (`geometry::FOLD_ANGLE`): on the
+//! t-shirt 18 single edges, scattered 5–12 rings inside the panels, each a local pinch rather
+//! than a crease line. The constraint set θ = 2π leaves about two degrees of freedom per
+//! vertex, so such a pinch can usually be opened by moving its neighbourhood along the
+//! constraints. That is what this does, one fold at a time:
+//!
+//! - Region: the vertices within [`RINGS`] edges of the fold's hinge (its two faces) that the
+//!   caller lets move; the rest of the mesh stays bit-identical. Rows: every constrained
+//!   vertex whose angle sum those moves change (the region and its one-ring).
+//! - Objective: ½ Σ_e (φ_e − t_e)₊² over the hinges the region moves (φ_e the turning angle
+//!   between the normals across e; t_e = 60° (`CREASE_ANGLE`) on the fold being opened and on
+//!   any other fold there, max(60°, min(φ_e at the start, 110°)) elsewhere, so no neighbour may
+//!   sharpen past where it was to absorb the fold, and one close to 120° is pushed below it
+//!   before a step tips it over), ½ Σ_c (α⁰_c − α_c)₊² over the region's corners (α⁰ =
+//!   min(10°, the corner at the start)), ½ Σ_e (l_e − l⁰_e)²/h̄² over its edges (bend, don't
+//!   stretch), and ½ μ |x − x⁰|²/h̄², a small pull to the start that makes the Gauss–Newton
+//!   Hessian regular.
+//! - Step: sequential quadratic programming on the dense KKT system
+//!   `[H + σI, Aᵀ; A, −εI]` (A = ∂θ/∂x of the rows, FL paper Props. 1–2) with a
+//!   Levenberg–Marquardt trust region σ (÷3 after a taken step, ×4 after a refused one), and
+//!   up to [`MAX_CORRECTIONS`] re-solves with the same factorisation against the rows'
+//!   residual at the trial, as develop's objective phase does. Regions hold 50–70 vertices
+//!   (about 300 unknowns), so a dense LU (faer) is exact and takes about a millisecond; the
+//!   sparse machinery would buy little here. At most [`MAX_TARGETS`] folds are tried.
+//! - A trial is taken only when every row keeps |2π − θ| within max(tolerance / 2, its value
+//!   at the start), the objective falls, no triangle degenerates, the region's fold count does
+//!   not grow and its smallest corner stays at or above min(1°, the region's smallest at the
+//!   start). The region's result is kept only if it has fewer folds than it started with.
+//!
+//! Folds the caller does not list (the input's own, e.g. a designed pleat) get no region of
+//! their own and are counted like any other, so a region never trades one for another; one
+//! that lies in a listed fold's region is pushed down like it.
+
+// Index loops over xyz and slots read like the equations they implement.
+#![allow(clippy::needless_range_loop)]
+
+use crate::algorithms::{AlgoError, Control, Progress};
+use crate::geometry::{
+    corner_angle, corner_angle_gradient, turning_angle_gradient, CREASE_ANGLE, FOLD_ANGLE,
+    SLIVER_DEGREES,
+};
+use crate::mesh::{is_degenerate_triangle, Mesh, NONE};
+use faer::linalg::solvers::Solve;
+use serde::Serialize;
+use std::f64::consts::{PI, TAU};
+
+/// Rings of neighbours around a fold's hinge that may move. Measured on the six converged
+/// shared garments with new folds (issue 12 note): 2, 3, 4, 3 then 5, 2 then 4 and three
+/// passes all left 133–142 of their 398 new folds; 3 alone was the cheapest.
+const RINGS: usize = 3;
+/// Most folds tried per mesh (a crumpled mesh has thousands; each costs a few dense solves).
+const MAX_TARGETS: usize = 2000;
+/// Iterations per region.
+const MAX_ITERATIONS: usize = 200;
+/// Re-solves against the rows' residual after a trial.
+const MAX_CORRECTIONS: usize = 6;
+/// Pull to the start, in units of h̄ (relative to the hinge terms, O(1) in radians).
+const CLOSENESS: f64 = 1e-3;
+/// Weight of Σ (l − l⁰)² / h̄² over the region's edges: the fold opens by bending, as a sheet
+/// would, not by stretching. Measured with develop (issue 12 note): without it the t-shirt's
+/// δS rose 9.91 → 11.10 % and gc_tee_sim's 13.1 → 17.7 % for their folds; with 1 they end at
+/// 9.92 % and 13.5 % (folds 10 → 1 and 55 → 9); 10 opened far fewer (6 and 29 left).
+const STRETCH: f64 = 1.0;
+const SIGMA_START: f64 = 1.0;
+const SIGMA_MIN: f64 = 1e-8;
+const SIGMA_MAX: f64 = 1e6;
+/// The (2,2) block's −εI: keeps the system solvable where a row's gradient vanishes.
+const REGULARISATION: f64 = 1e-10;
+/// Corners below this (or below where they started, if lower) are pushed back up.
+const CORNER_ONSET: f64 = PI / 18.0;
+/// Hinges within this of [`FOLD_ANGLE`] are pushed below it: their penalty would otherwise
+/// start at zero slope and the step would tip them over, which the fold count refuses.
+const MARGIN: f64 = PI / 18.0;
+
+/// What [`unfold`] did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Unfolded {
+    /// The positions, moved only where a fold was opened.
+    pub positions: Vec<[f64; 3]>,
+    /// The figures for the report.
+    pub summary: Summary,
+}
+
+/// What [`unfold`] did, for a job's report.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct Summary {
+    /// Folds of the mesh (listed or not) before.
+    pub folds_before: usize,
+    /// Folds of the mesh after.
+    pub folds_after: usize,
+    /// Listed folds still folded when their turn came (a neighbour's region may open one).
+    pub tried: usize,
+    /// Of those, how many are open at the end.
+    pub opened: usize,
+}
+
+/// Open the listed fold edges of `mesh` placed at `pos`, moving only `movable` vertices and
+/// keeping every `constrained` vertex's |2π − θ| within max(`tolerance` / 2, its value in
+/// `pos`) (half, so that writing the result to a file keeps it within the tolerance).
+pub fn unfold(
+    mesh: &Mesh,
+    pos: &[[f64; 3]],
+    targets: &[u32],
+    movable: &[bool],
+    constrained: &[bool],
+    tolerance: f64,
+    control: &dyn Control,
+) -> Result<Unfolded, AlgoError> {
+    let folds_before = crate::geometry::fold_count_at(mesh, pos);
+    let mut out = Unfolded {
+        positions: pos.to_vec(),
+        summary: Summary {
+            folds_before,
+            folds_after: folds_before,
+            ..Summary::default()
+        },
+    };
+    let h = crate::geometry::mean_edge_length(mesh);
+    if !(h > 0.0 && h.is_finite()) {
+        return Ok(out);
+    }
+    let mut scratch = Scratch::new(mesh.num_vertices());
+    let hinges: Vec<[u32; 4]> = targets
+        .iter()
+        .filter_map(|&e| hinge_of(mesh, e))
+        .take(MAX_TARGETS)
+        .collect();
+    for (t, &hinge) in hinges.iter().enumerate() {
+        if control.cancelled() {
+            return Err(AlgoError::Cancelled);
+        }
+        control.progress(&Progress {
+            stage: "unfold".into(),
+            iteration: t + 1,
+            max_flattenability: None,
+            step_norm: None,
+        });
+        if hinge_angle(&out.positions, hinge) <= FOLD_ANGLE {
+            continue; // opened by a neighbour's region
+        }
+        out.summary.tried += 1;
+        let region = Region::new(mesh, hinge, RINGS, movable, constrained, &mut scratch);
+        if region.verts.is_empty() {
+            continue;
+        }
+        if let Some(moved) = region.open(mesh, &out.positions, tolerance, h) {
+            for (s, &v) in region.verts.iter().enumerate() {
+                out.positions[v as usize] = moved[s];
+            }
+        }
+        if hinge_angle(&out.positions, hinge) <= FOLD_ANGLE {
+            out.summary.opened += 1;
+        }
+    }
+    out.summary.folds_after = crate::geometry::fold_count_at(mesh, &out.positions);
+    Ok(out)
+}
+
+/// Edge e's hinge (i, j, k, l): faces (i, j, k) and (j, i, l), or None on the boundary.
+fn hinge_of(mesh: &Mesh, e: u32) -> Option<[u32; 4]> {
+    let f = *mesh.conn().edge_faces().get(e as usize)?;
+    if f[1] == NONE {
+        return None;
+    }
+    let [a, b] = mesh.conn().edges()[e as usize];
+    let t0 = mesh.triangles()[f[0] as usize];
+    let t1 = mesh.triangles()[f[1] as usize];
+    let k0 = (0..3).find(|&k| t0[k] == a)?;
+    let (i, j) = if t0[(k0 + 1) % 3] == b {
+        (a, b)
+    } else {
+        (b, a)
+    };
+    let apex = |t: [u32; 3]| t.into_iter().find(|&x| x != i && x != j);
+    Some([i, j, apex(t0)?, apex(t1)?])
+}
+
+fn hinge_angle(pos: &[[f64; 3]], q: [u32; 4]) -> f64 {
+    let p = q.map(|v| pos[v as usize]);
+    turning_angle_gradient(p[0], p[1], p[2], p[3]).0
+}
+
+/// Per-vertex scratch shared by the regions (reset after each).
+struct Scratch {
+    slot: Vec<u32>,
+    row: Vec<u32>,
+    face: Vec<bool>,
+}
+
+impl Scratch {
+    fn new(nv: usize) -> Self {
+        Scratch {
+            slot: vec![NONE; nv],
+            row: vec![NONE; nv],
+            face: Vec::new(),
+        }
+    }
+}
+
+/// One fold's neighbourhood: moving vertices, rows, faces and hinges they change.
+struct Region {
+    verts: Vec<u32>,
+    rows: Vec<u32>,
+    faces: Vec<u32>,
+    /// Per face, its vertices' slots (NONE: fixed).
+    face_slots: Vec<[u32; 3]>,
+    /// Edges with a moving end, and their ends' slots.
+    edges: Vec<([u32; 2], [u32; 2])>,
+    /// Hinges (i, j, k, l) the moving vertices change, and each one's slot per vertex
+    /// (NONE: fixed).
+    hinges: Vec<([u32; 4], [u32; 4])>,
+    /// Per row, its fan as (face, corner) and the slots of the corner's three vertices.
+    fans: Vec<Vec<([u32; 3], [u32; 3])>>,
+}
+
+impl Region {
+    fn new(
+        mesh: &Mesh,
+        hinge: [u32; 4],
+        rings: usize,
+        movable: &[bool],
+        constrained: &[bool],
+        scratch: &mut Scratch,
+    ) -> Self {
+        let conn = mesh.conn();
+        // Breadth-first over the rings (every vertex reached, moving or not, to find them).
+        let mut seen: Vec<u32> = Vec::new();
+        let mut depth_of = std::collections::HashMap::new();
+        for v in hinge {
+            if depth_of.insert(v, 0usize).is_none() {
+                seen.push(v);
+            }
+        }
+        let mut at = 0;
+        while at < seen.len() {
+            let v = seen[at];
+            at += 1;
+            let d = depth_of[&v];
+            if d == rings {
+                continue;
+            }
+            for &w in conn.ring_of(v) {
+                if let std::collections::hash_map::Entry::Vacant(slot) = depth_of.entry(w) {
+                    slot.insert(d + 1);
+                    seen.push(w);
+                }
+            }
+        }
+        let verts: Vec<u32> = seen.into_iter().filter(|&v| movable[v as usize]).collect();
+        for (s, &v) in verts.iter().enumerate() {
+            scratch.slot[v as usize] = s as u32;
+        }
+        let mut rows = Vec::new();
+        for &v in &verts {
+            for &w in std::iter::once(&v).chain(conn.ring_of(v)) {
+                if constrained[w as usize] && scratch.row[w as usize] == NONE {
+                    scratch.row[w as usize] = rows.len() as u32;
+                    rows.push(w);
+                }
+            }
+        }
+        let tris = mesh.triangles();
+        scratch.face.resize(tris.len(), false);
+        let mut faces = Vec::new();
+        for &v in &verts {
+            for &he in conn.fan_of(v) {
+                let f = he / 3;
+                if !scratch.face[f as usize] {
+                    scratch.face[f as usize] = true;
+                    faces.push(f);
+                }
+            }
+        }
+        let mut hinges = Vec::new();
+        let mut edges = Vec::new();
+        let mut edges_seen = std::collections::HashSet::new();
+        for &f in &faces {
+            for k in 0..3 {
+                let e = conn.edge_of(3 * f + k as u32);
+                if edges_seen.insert(e) {
+                    let ends = conn.edges()[e as usize];
+                    let slots = ends.map(|v| scratch.slot[v as usize]);
+                    if slots != [NONE; 2] {
+                        edges.push((ends, slots));
+                    }
+                    if let Some(q) = hinge_of(mesh, e) {
+                        hinges.push((q, q.map(|v| scratch.slot[v as usize])));
+                    }
+                }
+            }
+        }
+        let face_slots = faces
+            .iter()
+            .map(|&f| tris[f as usize].map(|v| scratch.slot[v as usize]))
+            .collect();
+        let fans = rows
+            .iter()
+            .map(|&v| {
+                conn.fan_of(v)
+                    .iter()
+                    .map(|&he| {
+                        let (f, k) = ((he / 3) as usize, (he % 3) as usize);
+                        let t = tris[f];
+                        let c = [t[k], t[(k + 1) % 3], t[(k + 2) % 3]];
+                        (c, c.map(|x| scratch.slot[x as usize]))
+                    })
+                    .collect()
+            })
+            .collect();
+        for &v in &verts {
+            scratch.slot[v as usize] = NONE;
+        }
+        for &v in &rows {
+            scratch.row[v as usize] = NONE;
+        }
+        for &f in &faces {
+            scratch.face[f as usize] = false;
+        }
+        Region {
+            verts,
+            rows,
+            faces,
+            face_slots,
+            edges,
+            hinges,
+            fans,
+        }
+    }
+
+    /// The region's positions with fewer folds than at `pos`, or None.
+    fn open(&self, mesh: &Mesh, pos: &[[f64; 3]], tolerance: f64, h: f64) -> Option<Vec<[f64; 3]>> {
+        let m = self.verts.len();
+        let r = self.rows.len();
+        let n = 3 * m + r;
+        let x0: Vec<[f64; 3]> = self.verts.iter().map(|&v| pos[v as usize]).collect();
+        let mut work = pos.to_vec();
+        let residual = |p: &[[f64; 3]], out: &mut Vec<f64>| {
+            out.clear();
+            out.extend(self.fans.iter().map(|fan| {
+                TAU - fan
+                    .iter()
+                    .map(|(c, _)| {
+                        let [a, b, d] = c.map(|v| p[v as usize]);
+                        corner_angle(a, b, d)
+                    })
+                    .sum::<f64>()
+            }));
+        };
+        let mut c = Vec::with_capacity(r);
+        residual(&work, &mut c);
+        let bound: Vec<f64> = c.iter().map(|x| x.abs().max(0.5 * tolerance)).collect();
+        let targets: Vec<f64> = self
+            .hinges
+            .iter()
+            .map(|(q, _)| {
+                let phi = hinge_angle(pos, *q);
+                if phi > FOLD_ANGLE {
+                    CREASE_ANGLE
+                } else {
+                    CREASE_ANGLE.max(phi.min(FOLD_ANGLE - MARGIN))
+                }
+            })
+            .collect();
+        let folds = |p: &[[f64; 3]]| {
+            self.hinges
+                .iter()
+                .filter(|(q, _)| hinge_angle(p, *q) > FOLD_ANGLE)
+                .count()
+        };
+        let smallest = |p: &[[f64; 3]]| {
+            self.faces.iter().fold(f64::INFINITY, |s, &f| {
+                let [a, b, d] = mesh.triangles()[f as usize].map(|v| p[v as usize]);
+                s.min(corner_angle(a, b, d))
+                    .min(corner_angle(b, d, a))
+                    .min(corner_angle(d, a, b))
+            })
+        };
+        let corner_at = |p: &[[f64; 3]], f: u32, k: usize| {
+            let t = mesh.triangles()[f as usize];
+            corner_angle(
+                p[t[k] as usize],
+                p[t[(k + 1) % 3] as usize],
+                p[t[(k + 2) % 3] as usize],
+            )
+        };
+        let corner_targets: Vec<[f64; 3]> = self
+            .faces
+            .iter()
+            .map(|&f| [0, 1, 2].map(|k| CORNER_ONSET.min(corner_at(pos, f, k))))
+            .collect();
+        let length = |p: &[[f64; 3]], e: [u32; 2]| {
+            let d = crate::mesh::sub(p[e[0] as usize], p[e[1] as usize]);
+            crate::mesh::dot(d, d).sqrt()
+        };
+        let rest: Vec<f64> = self.edges.iter().map(|(e, _)| length(pos, *e)).collect();
+        // (½ Σ hinge² + ½ Σ corner², that plus the pull and the stretch): the penalty alone
+        // says when to stop.
+        let objective = |p: &[[f64; 3]]| {
+            let corners: f64 = self
+                .faces
+                .iter()
+                .zip(&corner_targets)
+                .map(|(&f, t)| {
+                    (0..3)
+                        .map(|k| (t[k] - corner_at(p, f, k)).max(0.0).powi(2))
+                        .sum::<f64>()
+                })
+                .sum();
+            let hinge: f64 = self
+                .hinges
+                .iter()
+                .zip(&targets)
+                .map(|((q, _), &t)| (hinge_angle(p, *q) - t).max(0.0).powi(2))
+                .sum();
+            let pull: f64 = self
+                .verts
+                .iter()
+                .zip(&x0)
+                .map(|(&v, q)| {
+                    let d = crate::mesh::sub(p[v as usize], *q);
+                    crate::mesh::dot(d, d)
+                })
+                .sum();
+            let stretch: f64 = self
+                .edges
+                .iter()
+                .zip(&rest)
+                .map(|((e, _), &l0)| (length(p, *e) - l0).powi(2))
+                .sum();
+            let penalty = 0.5 * (hinge + corners);
+            (
+                penalty,
+                penalty + 0.5 * (CLOSENESS * pull + STRETCH * stretch) / (h * h),
+            )
+        };
+        let folds0 = folds(pos);
+        let floor = smallest(pos).min(SLIVER_DEGREES.to_radians());
+        let mut f = objective(&work).1;
+        let mut sigma = SIGMA_START;
+        let mut trial = work.clone();
+        let mut ct = Vec::with_capacity(r);
+        let mut best: Option<(usize, f64, Vec<[f64; 3]>)> = None;
+        for _ in 0..MAX_ITERATIONS {
+            // K = [H + σI, Aᵀ; A, −εI] in units of h̄; right-hand side [−∇f; 2π − θ].
+            let mut kmat = faer::Mat::<f64>::zeros(n, n);
+            let mut rhs = vec![0.0; n];
+            for i in 0..3 * m {
+                kmat[(i, i)] = CLOSENESS + sigma;
+            }
+            for (s, &v) in self.verts.iter().enumerate() {
+                for i in 0..3 {
+                    rhs[3 * s + i] = -CLOSENESS * (work[v as usize][i] - x0[s][i]) / h;
+                }
+            }
+            for ((q, slots), &t) in self.hinges.iter().zip(&targets) {
+                let p = q.map(|v| work[v as usize]);
+                let (phi, g) = turning_angle_gradient(p[0], p[1], p[2], p[3]);
+                let res = phi - t;
+                if res <= 0.0 {
+                    continue;
+                }
+                for a in 0..4 {
+                    let sa = slots[a];
+                    if sa == NONE {
+                        continue;
+                    }
+                    for i in 0..3 {
+                        rhs[3 * sa as usize + i] -= res * g[a][i] * h;
+                    }
+                    for b in 0..4 {
+                        let sb = slots[b];
+                        if sb == NONE {
+                            continue;
+                        }
+                        for i in 0..3 {
+                            for j in 0..3 {
+                                kmat[(3 * sa as usize + i, 3 * sb as usize + j)] +=
+                                    g[a][i] * g[b][j] * h * h;
+                            }
+                        }
+                    }
+                }
+            }
+            for ((&fc, slots), t) in self.faces.iter().zip(&self.face_slots).zip(&corner_targets) {
+                let tri = mesh.triangles()[fc as usize];
+                for k in 0..3 {
+                    let p = [0, 1, 2].map(|x| work[tri[(k + x) % 3] as usize]);
+                    let res = t[k] - corner_angle(p[0], p[1], p[2]);
+                    if res <= 0.0 {
+                        continue;
+                    }
+                    // r = t − α: ∇r = −∇α.
+                    let (gb, gc) = corner_angle_gradient(p[0], p[1], p[2]);
+                    let g = [
+                        [0, 1, 2].map(|i| gb[i] + gc[i]),
+                        gb.map(|x| -x),
+                        gc.map(|x| -x),
+                    ];
+                    let sl = [0, 1, 2].map(|x| slots[(k + x) % 3]);
+                    for a in 0..3 {
+                        if sl[a] == NONE {
+                            continue;
+                        }
+                        for i in 0..3 {
+                            rhs[3 * sl[a] as usize + i] -= res * g[a][i] * h;
+                        }
+                        for b in 0..3 {
+                            if sl[b] == NONE {
+                                continue;
+                            }
+                            for i in 0..3 {
+                                for j in 0..3 {
+                                    kmat[(3 * sl[a] as usize + i, 3 * sl[b] as usize + j)] +=
+                                        g[a][i] * g[b][j] * h * h;
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+            // Stretch: residual (l − l⁰)/h̄, gradient ±u (unit edge direction) in units of h̄.
+            for ((e, slots), &l0) in self.edges.iter().zip(&rest) {
+                let d = crate::mesh::sub(work[e[0] as usize], work[e[1] as usize]);
+                let l = crate::mesh::dot(d, d).sqrt();
+                if l == 0.0 || STRETCH == 0.0 {
+                    continue;
+                }
+                let u = d.map(|x| x / l);
+                let res = (l - l0) / h;
+                let g = [u, u.map(|x| -x)];
+                for a in 0..2 {
+                    let sa = slots[a];
+                    if sa == NONE {
+                        continue;
+                    }
+                    for i in 0..3 {
+                        rhs[3 * sa as usize + i] -= STRETCH * res * g[a][i];
+                    }
+                    for b in 0..2 {
+                        let sb = slots[b];
+                        if sb == NONE {
+                            continue;
+                        }
+                        for i in 0..3 {
+                            for j in 0..3 {
+                                kmat[(3 * sa as usize + i, 3 * sb as usize + j)] +=
+                                    STRETCH * g[a][i] * g[b][j];
+                            }
+                        }
+                    }
+                }
+            }
+            for (row, fan) in self.fans.iter().enumerate() {
+                let ri = 3 * m + row;
+                kmat[(ri, ri)] = -REGULARISATION;
+                rhs[ri] = c[row];
+                for (corner, slots) in fan {
+                    let [a, b, d] = corner.map(|v| work[v as usize]);
+                    let (gb, gd) = corner_angle_gradient(a, b, d);
+                    let grads = [[0, 1, 2].map(|i| -(gb[i] + gd[i])), gb, gd];
+                    for x in 0..3 {
+                        if slots[x] == NONE {
+                            continue;
+                        }
+                        for i in 0..3 {
+                            let col = 3 * slots[x] as usize + i;
+                            kmat[(ri, col)] += grads[x][i] * h;
+                            kmat[(col, ri)] += grads[x][i] * h;
+                        }
+                    }
+                }
+            }
+            let lu = kmat.partial_piv_lu();
+            let mut sol = rhs;
+            lu.solve_in_place(faer::MatMut::from_column_major_slice_mut(&mut sol, n, 1));
+            if sol.iter().any(|x| !x.is_finite()) {
+                sigma *= 4.0;
+                if sigma > SIGMA_MAX {
+                    break;
+                }
+                continue;
+            }
+            trial.copy_from_slice(&work);
+            self.place(&mut trial, &sol, h);
+            // Back onto the rows with the same factorisation.
+            for _ in 0..MAX_CORRECTIONS {
+                residual(&trial, &mut ct);
+                if ct.iter().zip(&bound).all(|(x, b)| x.abs() <= 0.5 * b) {
+                    break;
+                }
+                let mut corr = vec![0.0; n];
+                corr[3 * m..].copy_from_slice(&ct);
+                lu.solve_in_place(faer::MatMut::from_column_major_slice_mut(&mut corr, n, 1));
+                if corr.iter().any(|x| !x.is_finite()) {
+                    break;
+                }
+                self.place(&mut trial, &corr, h);
+            }
+            residual(&trial, &mut ct);
+            let sound = self.faces.iter().all(|&fc| {
+                let [a, b, d] = mesh.triangles()[fc as usize].map(|v| trial[v as usize]);
+                !is_degenerate_triangle(a, b, d)
+            });
+            let (penalty, ft) = objective(&trial);
+            let taken = sound
+                && ft.is_finite()
+                && ft < f
+                && ct.iter().zip(&bound).all(|(x, b)| x.abs() <= *b)
+                && folds(&trial) <= folds0
+                && smallest(&trial) >= floor;
+            if taken {
+                std::mem::swap(&mut work, &mut trial);
+                std::mem::swap(&mut c, &mut ct);
+                f = ft;
+                sigma = (sigma / 3.0).max(SIGMA_MIN);
+                let nf = folds(&work);
+                if best.as_ref().is_none_or(|(bf, bo, _)| (nf, f) < (*bf, *bo)) {
+                    best = Some((
+                        nf,
+                        f,
+                        self.verts.iter().map(|&v| work[v as usize]).collect(),
+                    ));
+                }
+                // Every hinge and corner at its target: nothing left to open.
+                if penalty == 0.0 {
+                    break;
+                }
+            } else {
+                sigma *= 4.0;
+                if sigma > SIGMA_MAX {
+                    break;
+                }
+            }
+        }
+        best.filter(|(nf, _, _)| *nf < folds0).map(|(_, _, p)| p)
+    }
+
+    /// `p` moved by h̄ times the first 3m entries of `step`.
+    fn place(&self, p: &mut [[f64; 3]], step: &[f64], h: f64) {
+        for (s, &v) in self.verts.iter().enumerate() {
+            for i in 0..3 {
+                p[v as usize][i] += h * step[3 * s + i];
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::algorithms::Silent;
+    use crate::mesh::RawMesh;
+
+    /// A 12 × 4 grid of unit squares bent about its vertical grid lines, by ±10° (alternating)
+    /// and by `beta` about the line x = 6 (an isometry of the flat grid, so every interior
+    /// angle sum stays 2π, and no vertex is planar, where θ's gradient would vanish); its four
+    /// crease edges; and which vertices are in the two end columns.
+    fn folded_strip(beta: f64) -> (Mesh, Vec<u32>, Vec<bool>) {
+        let (nx, ny) = (12usize, 4usize);
+        let id = |i: usize, j: usize| (j * (nx + 1) + i) as u32;
+        let mut profile = vec![[0.0f64, 0.0]];
+        let mut heading = 0.0f64;
+        for i in 0..nx {
+            if i > 0 {
+                heading += if i == 6 {
+                    beta
+                } else if i % 2 == 0 {
+                    10f64.to_radians()
+                } else {
+                    -10f64.to_radians()
+                };
+            }
+            let [x, z] = profile[i];
+            profile.push([x + heading.cos(), z + heading.sin()]);
+        }
+        let mut positions = Vec::new();
+        let mut ends = Vec::new();
+        for j in 0..=ny {
+            for (i, [x, z]) in profile.iter().enumerate() {
+                positions.push([*x, j as f64, *z]);
+                ends.push(i == 0 || i == nx);
+            }
+        }
+        let mut triangles = Vec::new();
+        for j in 0..ny {
+            for i in 0..nx {
+                let (a, b, c, d) = (id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1));
+                triangles.push([a, b, c]);
+                triangles.push([a, c, d]);
+            }
+        }
+        let nf = triangles.len();
+        let raw = RawMesh {
+            positions,
+            triangles,
+            face_patch: vec![0; nf],
+            patch_names: vec!["strip".into()],
+            uv: None,
+        };
+        let (mesh, _) = Mesh::new(raw).expect("valid strip");
+        let crease: Vec<u32> = (0..ny)
+            .map(|j| {
+                let (a, b) = (id(6, j), id(6, j + 1));
+                let e = mesh
+                    .conn()
+                    .edges()
+                    .iter()
+                    .position(|&e| e == [a.min(b), a.max(b)])
+                    .expect("crease edge");
+                e as u32
+            })
+            .collect();
+        (mesh, crease, ends)
+    }
+
+    #[test]
+    fn a_sharp_straight_crease_opens_into_a_bend_and_stays_flattenable() {
+        let (mesh, crease, ends) = folded_strip(150f64.to_radians());
+        let interior: Vec<bool> = (0..mesh.num_vertices() as u32)
+            .map(|v| mesh.conn().is_interior(v))
+            .collect();
+        // The two end columns hold the strip; the rest may move.
+        let movable: Vec<bool> = ends.iter().map(|&e| !e).collect();
+        assert!(crate::geometry::max_flattenability(&mesh) < 1e-12);
+        let tol = 1e-6;
+        let done = unfold(
+            &mesh,
+            mesh.positions(),
+            &crease,
+            &movable,
+            &interior,
+            tol,
+            &Silent::default(),
+        )
+        .expect("runs");
+        assert_eq!(done.summary.folds_before, 4);
+        assert_eq!(done.summary.folds_after, 0, "{:?}", done.summary);
+        let out = mesh.with_positions(done.positions.clone()).expect("sound");
+        // Independent checks on the output itself.
+        assert_eq!(crate::geometry::fold_edges(&out).len(), 0);
+        let theta = crate::geometry::angle_sums(&out);
+        for v in 0..mesh.num_vertices() {
+            if interior[v] {
+                assert!(
+                    (TAU - theta[v]).abs() <= 0.5 * tol,
+                    "vertex {v}: {}",
+                    theta[v]
+                );
+            }
+            if !movable[v] {
+                assert_eq!(
+                    out.positions()[v],
+                    mesh.positions()[v],
+                    "fixed vertex {v} moved"
+                );
+            }
+        }
+        assert!(crate::geometry::smallest_corner(&out) >= SLIVER_DEGREES.to_radians());
+    }
+
+    #[test]
+    fn folds_not_listed_are_left_alone() {
+        let (mesh, _, _) = folded_strip(150f64.to_radians());
+        let all = vec![true; mesh.num_vertices()];
+        let done = unfold(
+            &mesh,
+            mesh.positions(),
+            &[],
+            &all,
+            &all,
+            1e-6,
+            &Silent::default(),
+        )
+        .expect("runs");
+        assert_eq!(done.positions, mesh.positions());
+        assert_eq!(done.summary.folds_after, 4);
+        assert_eq!(done.summary.tried, 0);
+    }
+}
