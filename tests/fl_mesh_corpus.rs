@@ -61,6 +61,11 @@ fn check_never_worse(name: &str, mesh: &Mesh, params: &Params) -> (f64, f64, boo
         assert!(u.folds_after <= u.folds_before, "{name}: {u:?}");
         assert_eq!(u.folds_after, m.folds_out, "{name}: {u:?}");
         assert!(u.opened <= u.tried, "{name}: {u:?}");
+        let slivers = flatmesh::geometry::min_corner_angles(&out)
+            .into_iter()
+            .filter(|&a| a < params.min_angle.to_radians())
+            .count();
+        assert_eq!(u.slivers_after, slivers, "{name}: {u:?}");
     }
     if params.shape_guard {
         assert!(

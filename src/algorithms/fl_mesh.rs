@@ -150,14 +150,16 @@
 //!   at least a clearance outside a body, one inequality row per vertex on the same fixed KKT
 //!   pattern with an active set, every trial checked with the exact distance (`contact`).
 //! - Unfolding (`unfold`, default on; [`open_new_folds`], the `unfold` module). The result's
-//!   folds that the input did not have are opened one neighbourhood at a time along the
-//!   constraints, keeping every interior vertex within max(tolerance / 2, where it was). On
+//!   folds, then its faces with a corner below `min_angle`, that the input did not have are
+//!   repaired one neighbourhood at a time along the constraints, keeping every interior vertex
+//!   within max(tolerance / 2, where it was). On
 //!   the shared garments they are isolated pinched hinges 5–12 rings inside the panels, not
-//!   crease lines. Measured (issue 12 note, fl-mesh defaults): t-shirt 18 → 4 folds,
-//!   pf_robert_shirt_14 129 → 25, mh_female_casualsuit02 214 → 91, mh_female_sportsuit01
-//!   18 → 4, gc_tee_sim 10 → 1, mh_classicshoes_medium 10 → 2 (its input has 12), the
-//!   unconverged mh_male_worksuit01 13 → 4; ϖ_max stays ≤ 1e-6 on every converged one, for
-//!   0.1–4 s more.
+//!   crease lines. Measured (issue 12 note, fl-mesh defaults; folds, then faces below 2°):
+//!   t-shirt 18 → 4 and 2 → 0, pf_robert_shirt_14 129 → 23 and 3 → 5,
+//!   mh_female_casualsuit02 214 → 85 and 24 → 23, mh_female_sportsuit01 18 → 3 and 12 → 9,
+//!   gc_tee_sim 10 → 1, mh_classicshoes_medium 10 → 2 (its input has 12), the unconverged
+//!   mh_male_worksuit01 13 → 3 and 12 → 8; ϖ_max stays ≤ 1e-6 on every converged one, for
+//!   0.3–4 s more.
 //! - Closed components whose Euler characteristic χ ≠ 0 cannot become flattenable
 //!   (Gauss–Bonnet: the angle defects sum to 2πχ); their vertices are held fixed and reported
 //!   as stuck, and the run ends with `converged: false`.
@@ -578,8 +580,9 @@ pub fn solve(
     open_new_folds(mesh, out, report, params, control)
 }
 
-/// The result's folds that the input did not have (by vertex pair: refinement's new edges
-/// count as new), opened by [`super::unfold::unfold`], moving only the free vertices.
+/// The result's folds and slivers (a corner below `min_angle`) that the input did not have
+/// (by vertex pair and triple: refinement's new edges and faces count as new), repaired by
+/// [`super::unfold::unfold`], moving only the free vertices.
 fn open_new_folds(
     input: &Mesh,
     out: Mesh,
@@ -594,26 +597,44 @@ fn open_new_folds(
         .into_iter()
         .map(|e| input.conn().edges()[e as usize])
         .collect();
-    let targets: Vec<u32> = crate::geometry::fold_edges(&out)
+    let folds: Vec<u32> = crate::geometry::fold_edges(&out)
         .into_iter()
         .filter(|&e| !old.contains(&out.conn().edges()[e as usize]))
         .collect();
-    if targets.is_empty() {
+    // Faces with a corner below `min_angle` that the input did not have (by vertex triple).
+    let min_corner = params.min_angle.to_radians();
+    let sliver_faces = |m: &Mesh| {
+        let small = crate::geometry::min_corner_angles(m);
+        (0..m.num_faces()).filter(move |&f| small[f] < min_corner)
+    };
+    let key = |t: [u32; 3]| {
+        let mut t = t;
+        t.sort_unstable();
+        t
+    };
+    let old_slivers: std::collections::HashSet<[u32; 3]> = sliver_faces(input)
+        .map(|f| key(input.triangles()[f]))
+        .collect();
+    let slivers: Vec<u32> = sliver_faces(&out)
+        .filter(|&f| !old_slivers.contains(&key(out.triangles()[f])))
+        .map(|f| f as u32)
+        .collect();
+    if folds.is_empty() && slivers.is_empty() {
         return Ok((out, report));
     }
     let impossible = impossible_vertices(&out);
     let free: Vec<bool> = (0..out.num_vertices())
         .map(|v| out.conn().is_interior(v as u32) && !impossible[v])
         .collect();
-    let done = super::unfold::unfold(
-        &out,
-        out.positions(),
-        &targets,
-        &free,
-        &free,
-        params.tolerance,
-        control,
-    )?;
+    let task = super::unfold::Task {
+        folds: &folds,
+        slivers: &slivers,
+        min_corner,
+        movable: &free,
+        constrained: &free,
+        tolerance: params.tolerance,
+    };
+    let done = super::unfold::unfold(&out, out.positions(), &task, control)?;
     let Ok(unfolded) = out.with_positions(done.positions) else {
         return Ok((out, report));
     };

@@ -1,14 +1,17 @@
-//! Opening the folds an optimiser left in a flattenable mesh without losing flattenability
-//! (issue 12: "no output has more folds than its input").
+//! Opening the folds and slivers an optimiser left in a flattenable mesh without losing
+//! flattenability (issue 12: "no output has more folds than its input; no corner angle below
+//! the stated minimum unless the input had one").
 //!
 //! fl-mesh and develop reach θ = 2π by normal steps that, on whole garments, concentrate the
 //! change into a few isolated hinges turning past 120° (`geometry::FOLD_ANGLE`): on the
 //! t-shirt 18 single edges, scattered 5–12 rings inside the panels, each a local pinch rather
 //! than a crease line. The constraint set θ = 2π leaves about two degrees of freedom per
 //! vertex, so such a pinch can usually be opened by moving its neighbourhood along the
-//! constraints. That is what this does, one fold at a time:
+//! constraints. That is what this does, one fold at a time, and then likewise one sliver (a
+//! face with a corner below the task's minimum) at a time:
 //!
-//! - Region: the vertices within [`RINGS`] edges of the fold's hinge (its two faces) that the
+//! - Region: the vertices within [`RINGS`] edges of the fold's hinge (its two faces), or of
+//!   the sliver, that the
 //!   caller lets move; the rest of the mesh stays bit-identical. Rows: every constrained
 //!   vertex whose angle sum those moves change (the region and its one-ring).
 //! - Objective: ½ Σ_e (φ_e − t_e)₊² over the hinges the region moves (φ_e the turning angle
@@ -16,8 +19,9 @@
 //!   any other fold there, max(60°, min(φ_e at the start, 110°)) elsewhere, so no neighbour may
 //!   sharpen past where it was to absorb the fold, and one close to 120° is pushed below it
 //!   before a step tips it over), ½ Σ_c (α⁰_c − α_c)₊² over the region's corners (α⁰ =
-//!   min(10°, the corner at the start)), ½ Σ_e (l_e − l⁰_e)²/h̄² over its edges (bend, don't
-//!   stretch), and ½ μ |x − x⁰|²/h̄², a small pull to the start that makes the Gauss–Newton
+//!   min(10°, the corner at the start); 1.5 times the minimum for a corner below it), ½ Σ_e
+//!   (l_e − l⁰_e)²/h̄² over its edges for a fold (bend, don't stretch; a sliver's repair is a
+//!   change of lengths, so not there), and ½ μ |x − x⁰|²/h̄², a small pull to the start that makes the Gauss–Newton
 //!   Hessian regular.
 //! - Step: sequential quadratic programming on the dense KKT system
 //!   `[H + σI, Aᵀ; A, −εI]` (A = ∂θ/∂x of the rows, FL paper Props. 1–2) with a
@@ -29,7 +33,12 @@
 //! - A trial is taken only when every row keeps |2π − θ| within max(tolerance / 2, its value
 //!   at the start), the objective falls, no triangle degenerates, the region's fold count does
 //!   not grow and its smallest corner stays at or above min(1°, the region's smallest at the
-//!   start). The region's result is kept only if it has fewer folds than it started with.
+//!   start); a sliver's region may not add a face below the minimum either. The region's result
+//!   is kept only if it has fewer folds (a sliver's: fewer folds plus slivers) than it started
+//!   with. A fold's region may leave a corner between 1° and the minimum; the sliver pass then
+//!   takes such faces too. Measured on the six converged shared garments with new folds
+//!   (issue 12 note): holding the minimum in fold regions as well left 157 folds and 20
+//!   slivers; this order leaves 121 and 45.
 //!
 //! Folds the caller does not list (the input's own, e.g. a designed pleat) get no region of
 //! their own and are counted like any other, so a region never trades one for another; one
@@ -52,6 +61,12 @@ use std::f64::consts::{PI, TAU};
 /// shared garments with new folds (issue 12 note): 2, 3, 4, 3 then 5, 2 then 4 and three
 /// passes all left 133–142 of their 398 new folds; 3 alone was the cheapest.
 const RINGS: usize = 3;
+/// Most vertices a region may move (a regular mesh's 3 rings hold 50–70; the dense KKT
+/// system has about four unknowns per vertex, so this bounds it near 500 × 500, 2 MB), and
+/// most vertices its breadth-first search may reach (16 times that bounds the corners of the
+/// rows' fans): a hub of 60k long fan triangles would otherwise ask for a 460 GB matrix.
+const MAX_REGION: usize = 120;
+const MAX_REGION_REACH: usize = 1000;
 /// Most folds tried per mesh (a crumpled mesh has thousands; each costs a few dense solves).
 const MAX_TARGETS: usize = 2000;
 /// Iterations per region.
@@ -63,13 +78,16 @@ const CLOSENESS: f64 = 1e-3;
 /// Weight of Σ (l − l⁰)² / h̄² over the region's edges: the fold opens by bending, as a sheet
 /// would, not by stretching. Measured with develop (issue 12 note): without it the t-shirt's
 /// δS rose 9.91 → 11.10 % and gc_tee_sim's 13.1 → 17.7 % for their folds; with 1 they end at
-/// 9.92 % and 13.5 % (folds 10 → 1 and 55 → 9); 10 opened far fewer (6 and 29 left).
+/// 9.92 % and 13.5 % (folds 10 → 1 and 55 → 9); 10 opened far fewer (6 and 29 left). Not for
+/// a sliver, whose repair is a change of lengths.
 const STRETCH: f64 = 1.0;
 const SIGMA_START: f64 = 1.0;
 const SIGMA_MIN: f64 = 1e-8;
 const SIGMA_MAX: f64 = 1e6;
 /// The (2,2) block's −εI: keeps the system solvable where a row's gradient vanishes.
 const REGULARISATION: f64 = 1e-10;
+/// A sliver's corners (below the task's minimum) are pushed up to this many times it.
+const SLIVER_MARGIN: f64 = 1.5;
 /// Corners below this (or below where they started, if lower) are pushed back up.
 const CORNER_ONSET: f64 = PI / 18.0;
 /// Hinges within this of [`FOLD_ANGLE`] are pushed below it: their penalty would otherwise
@@ -92,30 +110,52 @@ pub struct Summary {
     pub folds_before: usize,
     /// Folds of the mesh after.
     pub folds_after: usize,
-    /// Listed folds still folded when their turn came (a neighbour's region may open one).
+    /// Faces with a corner below the minimum, before.
+    pub slivers_before: usize,
+    /// Faces with a corner below the minimum, after.
+    pub slivers_after: usize,
+    /// Listed folds and slivers still there when their turn came (a neighbour's region may
+    /// repair one).
     pub tried: usize,
-    /// Of those, how many are open at the end.
+    /// Of those, how many are repaired at the end.
     pub opened: usize,
 }
 
-/// Open the listed fold edges of `mesh` placed at `pos`, moving only `movable` vertices and
-/// keeping every `constrained` vertex's |2π − θ| within max(`tolerance` / 2, its value in
-/// `pos`) (half, so that writing the result to a file keeps it within the tolerance).
+/// What to repair and under which limits.
+#[derive(Debug, Clone, Copy)]
+pub struct Task<'a> {
+    /// Fold edges to open (edge ids of the mesh).
+    pub folds: &'a [u32],
+    /// Faces whose smallest corner, below `min_corner`, to open up (face ids).
+    pub slivers: &'a [u32],
+    /// Radians: a corner below this counts as a sliver's.
+    pub min_corner: f64,
+    /// Which vertices may move.
+    pub movable: &'a [bool],
+    /// Which vertices' angle sums are held.
+    pub constrained: &'a [bool],
+    /// ϖ tolerance: every constrained vertex stays within max(tolerance / 2, where it was)
+    /// (half, so that writing the result to a file keeps it within the tolerance).
+    pub tolerance: f64,
+}
+
+/// Open the task's folds, then its slivers, of `mesh` placed at `pos`, one neighbourhood at
+/// a time (see the module doc).
 pub fn unfold(
     mesh: &Mesh,
     pos: &[[f64; 3]],
-    targets: &[u32],
-    movable: &[bool],
-    constrained: &[bool],
-    tolerance: f64,
+    task: &Task<'_>,
     control: &dyn Control,
 ) -> Result<Unfolded, AlgoError> {
     let folds_before = crate::geometry::fold_count_at(mesh, pos);
+    let slivers_before = sliver_count(mesh, pos, task.min_corner);
     let mut out = Unfolded {
         positions: pos.to_vec(),
         summary: Summary {
             folds_before,
             folds_after: folds_before,
+            slivers_before,
+            slivers_after: slivers_before,
             ..Summary::default()
         },
     };
@@ -124,40 +164,125 @@ pub fn unfold(
         return Ok(out);
     }
     let mut scratch = Scratch::new(mesh.num_vertices());
-    let hinges: Vec<[u32; 4]> = targets
+    // Folds first, then slivers: the task's and any a fold's region left (a fold's region
+    // may take a corner down to min(1°, its smallest); the sliver pass lifts it again).
+    let folds: Vec<Seed> = task
+        .folds
         .iter()
-        .filter_map(|&e| hinge_of(mesh, e))
+        .filter_map(|&e| hinge_of(mesh, e).map(Seed::Fold))
         .take(MAX_TARGETS)
         .collect();
-    for (t, &hinge) in hinges.iter().enumerate() {
+    let mut done = 0;
+    repair(
+        mesh,
+        &folds,
+        task,
+        h,
+        &mut scratch,
+        &mut out,
+        &mut done,
+        control,
+    )?;
+    let listed: std::collections::HashSet<u32> = task.slivers.iter().copied().collect();
+    let slivers: Vec<Seed> = task
+        .slivers
+        .iter()
+        .copied()
+        .chain((0..mesh.num_faces() as u32).filter(|&f| {
+            !listed.contains(&f)
+                && smallest_of(mesh, &out.positions, f) < task.min_corner
+                && smallest_of(mesh, pos, f) >= task.min_corner
+        }))
+        .map(Seed::Sliver)
+        .take(MAX_TARGETS.saturating_sub(folds.len()))
+        .collect();
+    repair(
+        mesh,
+        &slivers,
+        task,
+        h,
+        &mut scratch,
+        &mut out,
+        &mut done,
+        control,
+    )?;
+    out.summary.folds_after = crate::geometry::fold_count_at(mesh, &out.positions);
+    out.summary.slivers_after = sliver_count(mesh, &out.positions, task.min_corner);
+    Ok(out)
+}
+
+/// Repair each seed still there in turn; `done` counts regions for progress.
+#[allow(clippy::too_many_arguments)]
+fn repair(
+    mesh: &Mesh,
+    seeds: &[Seed],
+    task: &Task<'_>,
+    h: f64,
+    scratch: &mut Scratch,
+    out: &mut Unfolded,
+    done: &mut usize,
+    control: &dyn Control,
+) -> Result<(), AlgoError> {
+    let pending = |p: &[[f64; 3]], seed: &Seed| match *seed {
+        Seed::Fold(q) => hinge_angle(p, q) > FOLD_ANGLE,
+        Seed::Sliver(f) => smallest_of(mesh, p, f) < task.min_corner,
+    };
+    for seed in seeds {
         if control.cancelled() {
             return Err(AlgoError::Cancelled);
         }
+        *done += 1;
         control.progress(&Progress {
             stage: "unfold".into(),
-            iteration: t + 1,
+            iteration: *done,
             max_flattenability: None,
             step_norm: None,
         });
-        if hinge_angle(&out.positions, hinge) <= FOLD_ANGLE {
-            continue; // opened by a neighbour's region
+        if !pending(&out.positions, seed) {
+            continue; // repaired by a neighbour's region
         }
         out.summary.tried += 1;
-        let region = Region::new(mesh, hinge, RINGS, movable, constrained, &mut scratch);
+        let vertices: &[u32] = match seed {
+            Seed::Fold(q) => q,
+            Seed::Sliver(f) => &mesh.triangles()[*f as usize],
+        };
+        let Some(region) = Region::new(mesh, vertices, RINGS, task, scratch) else {
+            continue; // a neighbourhood too large for a dense solve (a hub of long fans)
+        };
         if region.verts.is_empty() {
             continue;
         }
-        if let Some(moved) = region.open(mesh, &out.positions, tolerance, h) {
+        if let Some(moved) = region.open(mesh, &out.positions, task, seed, h) {
             for (s, &v) in region.verts.iter().enumerate() {
                 out.positions[v as usize] = moved[s];
             }
         }
-        if hinge_angle(&out.positions, hinge) <= FOLD_ANGLE {
+        if !pending(&out.positions, seed) {
             out.summary.opened += 1;
         }
     }
-    out.summary.folds_after = crate::geometry::fold_count_at(mesh, &out.positions);
-    Ok(out)
+    Ok(())
+}
+
+/// What a region is built around.
+enum Seed {
+    Fold([u32; 4]),
+    Sliver(u32),
+}
+
+/// Smallest corner of face f at `p`.
+fn smallest_of(mesh: &Mesh, p: &[[f64; 3]], f: u32) -> f64 {
+    let [a, b, c] = mesh.triangles()[f as usize].map(|v| p[v as usize]);
+    corner_angle(a, b, c)
+        .min(corner_angle(b, c, a))
+        .min(corner_angle(c, a, b))
+}
+
+/// Faces with a corner below `min_corner` at `p`.
+fn sliver_count(mesh: &Mesh, p: &[[f64; 3]], min_corner: f64) -> usize {
+    (0..mesh.num_faces() as u32)
+        .filter(|&f| smallest_of(mesh, p, f) < min_corner)
+        .count()
 }
 
 /// Edge e's hinge (i, j, k, l): faces (i, j, k) and (j, i, l), or None on the boundary.
@@ -220,17 +345,17 @@ struct Region {
 impl Region {
     fn new(
         mesh: &Mesh,
-        hinge: [u32; 4],
+        seed: &[u32],
         rings: usize,
-        movable: &[bool],
-        constrained: &[bool],
+        task: &Task<'_>,
         scratch: &mut Scratch,
-    ) -> Self {
+    ) -> Option<Self> {
+        let (movable, constrained) = (task.movable, task.constrained);
         let conn = mesh.conn();
         // Breadth-first over the rings (every vertex reached, moving or not, to find them).
         let mut seen: Vec<u32> = Vec::new();
         let mut depth_of = std::collections::HashMap::new();
-        for v in hinge {
+        for &v in seed {
             if depth_of.insert(v, 0usize).is_none() {
                 seen.push(v);
             }
@@ -247,10 +372,22 @@ impl Region {
                 if let std::collections::hash_map::Entry::Vacant(slot) = depth_of.entry(w) {
                     slot.insert(d + 1);
                     seen.push(w);
+                    if seen.len() > MAX_REGION_REACH {
+                        return None;
+                    }
                 }
             }
         }
         let verts: Vec<u32> = seen.into_iter().filter(|&v| movable[v as usize]).collect();
+        // The rows' fans bound the work per iteration as the vertices bound the matrix.
+        let fan_corners: usize = verts
+            .iter()
+            .flat_map(|&v| std::iter::once(v).chain(conn.ring_of(v).iter().copied()))
+            .map(|w| conn.fan_of(w).len())
+            .sum();
+        if verts.len() > MAX_REGION || fan_corners > MAX_REGION_REACH * 16 {
+            return None;
+        }
         for (s, &v) in verts.iter().enumerate() {
             scratch.slot[v as usize] = s as u32;
         }
@@ -320,7 +457,7 @@ impl Region {
         for &f in &faces {
             scratch.face[f as usize] = false;
         }
-        Region {
+        Some(Region {
             verts,
             rows,
             faces,
@@ -328,11 +465,25 @@ impl Region {
             edges,
             hinges,
             fans,
-        }
+        })
     }
 
     /// The region's positions with fewer folds than at `pos`, or None.
-    fn open(&self, mesh: &Mesh, pos: &[[f64; 3]], tolerance: f64, h: f64) -> Option<Vec<[f64; 3]>> {
+    fn open(
+        &self,
+        mesh: &Mesh,
+        pos: &[[f64; 3]],
+        task: &Task<'_>,
+        seed: &Seed,
+        h: f64,
+    ) -> Option<Vec<[f64; 3]>> {
+        // A fold opens by bending (lengths held); a sliver is a matter of lengths, and a
+        // fold's region counts only folds (the sliver pass comes after it).
+        let (stretch_weight, hold_slivers) = match seed {
+            Seed::Fold(_) => (STRETCH, false),
+            Seed::Sliver(_) => (0.0, true),
+        };
+        let (tolerance, min_corner) = (task.tolerance, task.min_corner);
         let m = self.verts.len();
         let r = self.rows.len();
         let n = 3 * m + r;
@@ -390,8 +541,23 @@ impl Region {
         let corner_targets: Vec<[f64; 3]> = self
             .faces
             .iter()
-            .map(|&f| [0, 1, 2].map(|k| CORNER_ONSET.min(corner_at(pos, f, k))))
+            .map(|&f| {
+                [0, 1, 2].map(|k| {
+                    let a = corner_at(pos, f, k);
+                    if a < min_corner {
+                        SLIVER_MARGIN * min_corner
+                    } else {
+                        CORNER_ONSET.min(a)
+                    }
+                })
+            })
             .collect();
+        let slivers = |p: &[[f64; 3]]| {
+            self.faces
+                .iter()
+                .filter(|&&f| smallest_of(mesh, p, f) < min_corner)
+                .count()
+        };
         let length = |p: &[[f64; 3]], e: [u32; 2]| {
             let d = crate::mesh::sub(p[e[0] as usize], p[e[1] as usize]);
             crate::mesh::dot(d, d).sqrt()
@@ -434,10 +600,11 @@ impl Region {
             let penalty = 0.5 * (hinge + corners);
             (
                 penalty,
-                penalty + 0.5 * (CLOSENESS * pull + STRETCH * stretch) / (h * h),
+                penalty + 0.5 * (CLOSENESS * pull + stretch_weight * stretch) / (h * h),
             )
         };
         let folds0 = folds(pos);
+        let slivers0 = slivers(pos);
         let floor = smallest(pos).min(SLIVER_DEGREES.to_radians());
         let mut f = objective(&work).1;
         let mut sigma = SIGMA_START;
@@ -526,7 +693,7 @@ impl Region {
             for ((e, slots), &l0) in self.edges.iter().zip(&rest) {
                 let d = crate::mesh::sub(work[e[0] as usize], work[e[1] as usize]);
                 let l = crate::mesh::dot(d, d).sqrt();
-                if l == 0.0 || STRETCH == 0.0 {
+                if l == 0.0 || stretch_weight == 0.0 {
                     continue;
                 }
                 let u = d.map(|x| x / l);
@@ -538,7 +705,7 @@ impl Region {
                         continue;
                     }
                     for i in 0..3 {
-                        rhs[3 * sa as usize + i] -= STRETCH * res * g[a][i];
+                        rhs[3 * sa as usize + i] -= stretch_weight * res * g[a][i];
                     }
                     for b in 0..2 {
                         let sb = slots[b];
@@ -548,7 +715,7 @@ impl Region {
                         for i in 0..3 {
                             for j in 0..3 {
                                 kmat[(3 * sa as usize + i, 3 * sb as usize + j)] +=
-                                    STRETCH * g[a][i] * g[b][j];
+                                    stretch_weight * g[a][i] * g[b][j];
                             }
                         }
                     }
@@ -611,13 +778,14 @@ impl Region {
                 && ft < f
                 && ct.iter().zip(&bound).all(|(x, b)| x.abs() <= *b)
                 && folds(&trial) <= folds0
+                && (!hold_slivers || slivers(&trial) <= slivers0)
                 && smallest(&trial) >= floor;
             if taken {
                 std::mem::swap(&mut work, &mut trial);
                 std::mem::swap(&mut c, &mut ct);
                 f = ft;
                 sigma = (sigma / 3.0).max(SIGMA_MIN);
-                let nf = folds(&work);
+                let nf = folds(&work) + if hold_slivers { slivers(&work) } else { 0 };
                 if best.as_ref().is_none_or(|(bf, bo, _)| (nf, f) < (*bf, *bo)) {
                     best = Some((
                         nf,
@@ -636,7 +804,8 @@ impl Region {
                 }
             }
         }
-        best.filter(|(nf, _, _)| *nf < folds0).map(|(_, _, p)| p)
+        let defects0 = folds0 + if hold_slivers { slivers0 } else { 0 };
+        best.filter(|(nf, _, _)| *nf < defects0).map(|(_, _, p)| p)
     }
 
     /// `p` moved by h̄ times the first 3m entries of `step`.
@@ -727,16 +896,15 @@ mod tests {
         let movable: Vec<bool> = ends.iter().map(|&e| !e).collect();
         assert!(crate::geometry::max_flattenability(&mesh) < 1e-12);
         let tol = 1e-6;
-        let done = unfold(
-            &mesh,
-            mesh.positions(),
-            &crease,
-            &movable,
-            &interior,
-            tol,
-            &Silent::default(),
-        )
-        .expect("runs");
+        let task = Task {
+            folds: &crease,
+            slivers: &[],
+            min_corner: 2f64.to_radians(),
+            movable: &movable,
+            constrained: &interior,
+            tolerance: tol,
+        };
+        let done = unfold(&mesh, mesh.positions(), &task, &Silent::default()).expect("runs");
         assert_eq!(done.summary.folds_before, 4);
         assert_eq!(done.summary.folds_after, 0, "{:?}", done.summary);
         let out = mesh.with_positions(done.positions.clone()).expect("sound");
@@ -766,18 +934,54 @@ mod tests {
     fn folds_not_listed_are_left_alone() {
         let (mesh, _, _) = folded_strip(150f64.to_radians());
         let all = vec![true; mesh.num_vertices()];
-        let done = unfold(
-            &mesh,
-            mesh.positions(),
-            &[],
-            &all,
-            &all,
-            1e-6,
-            &Silent::default(),
-        )
-        .expect("runs");
+        let task = Task {
+            folds: &[],
+            slivers: &[],
+            min_corner: 2f64.to_radians(),
+            movable: &all,
+            constrained: &all,
+            tolerance: 1e-6,
+        };
+        let done = unfold(&mesh, mesh.positions(), &task, &Silent::default()).expect("runs");
         assert_eq!(done.positions, mesh.positions());
         assert_eq!(done.summary.folds_after, 4);
         assert_eq!(done.summary.tried, 0);
+    }
+
+    #[test]
+    fn a_sliver_slid_along_a_ruling_opens_up_and_stays_flattenable() {
+        // No crease; vertex (3, 2) slid up its ruling to 0.03 below (3, 3): an isometry of
+        // the development, so θ stays 2π, and four faces get corners far below 2°.
+        let (mut mesh, _, ends) = folded_strip(10f64.to_radians());
+        let v = 2 * 13 + 3;
+        let mut p = mesh.positions().to_vec();
+        p[v][1] += 0.97;
+        mesh = mesh.with_positions(p).expect("sound");
+        assert!(crate::geometry::max_flattenability(&mesh) < 1e-12);
+        let min_corner = 2f64.to_radians();
+        let slivers: Vec<u32> = (0..mesh.num_faces() as u32)
+            .filter(|&f| smallest_of(&mesh, mesh.positions(), f) < min_corner)
+            .collect();
+        assert!(slivers.len() >= 2, "{slivers:?}");
+        let interior: Vec<bool> = (0..mesh.num_vertices() as u32)
+            .map(|v| mesh.conn().is_interior(v))
+            .collect();
+        let movable: Vec<bool> = ends.iter().map(|&e| !e).collect();
+        let tol = 1e-6;
+        let task = Task {
+            folds: &[],
+            slivers: &slivers,
+            min_corner,
+            movable: &movable,
+            constrained: &interior,
+            tolerance: tol,
+        };
+        let done = unfold(&mesh, mesh.positions(), &task, &Silent::default()).expect("runs");
+        let out = mesh.with_positions(done.positions.clone()).expect("sound");
+        assert_eq!(done.summary.slivers_before, slivers.len());
+        assert_eq!(done.summary.slivers_after, 0, "{:?}", done.summary);
+        assert!(crate::geometry::smallest_corner(&out) >= min_corner);
+        assert_eq!(crate::geometry::fold_edges(&out).len(), 0);
+        assert!(crate::geometry::max_flattenability(&out) <= 0.5 * tol);
     }
 }

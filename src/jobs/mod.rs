@@ -150,9 +150,9 @@ impl Kind {
                  cone), retry=true|false (true: a run that stalled before max_iterations is \
                  retried, its independent parts alone from the input and then once more from \
                  their best result, or a one-part mesh from its best result; each run gets \
-                 max_iterations of its own), unfold=true|false (true: the folds the run \
-                 made are then opened where that keeps every vertex flattenable; not with \
-                 until=stationary)"
+                 max_iterations of its own), unfold=true|false (true: the folds, then the \
+                 corners below min_angle, the run made are then repaired where that keeps \
+                 every vertex flattenable; not with until=stationary)"
             }
             Kind::Subdivide => {
                 "levels (1; or --levels), curves (or --curves), split_ratio (0.5), \
@@ -176,8 +176,8 @@ impl Kind {
                  (sqp: 1e-2), smoothness (sqp: 10, then 0 once flattenable and stationary), step_tolerance (sqp: 1e-4), stall_iterations (sqp: 40), restore=true|false (sqp: true; \
                  an unflattenable stall is followed by fl-mesh from the input, boundary fixed, \
                  and the SQP again from its result, with max_iterations of its own), \
-                 unfold=true|false (sqp: true; a flattenable result's new folds are opened \
-                 along the constraints, lengths held), eta \
+                 unfold=true|false (sqp: true; a flattenable result's new folds and corners \
+                 below 1 degree are repaired along the constraints), eta \
                  (penalty_cg: 1e-4), cg_steps (penalty_cg: 5), delta_t (local: the mean edge \
                  length), max_moves (local: 500000), update=gauss_newton|newton (local: \
                  gauss_newton), relaxation (local gauss_newton: 1.8), levels (loop: 1)"

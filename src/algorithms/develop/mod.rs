@@ -546,7 +546,8 @@ pub fn run(
     })
 }
 
-/// The folds of a flattenable `out` that `start` did not have, opened where that keeps every
+/// The folds and slivers (a corner below 1°) of a flattenable `out` that `start` did not
+/// have, repaired where that keeps every
 /// constrained vertex within the tolerance ([`super::unfold::unfold`]); None when there were
 /// none, or the result is not flattenable (the unfolding keeps each vertex where it was, but
 /// a stalled run's answer is the best iterate, which is left as it is).
@@ -572,22 +573,33 @@ fn open_new_folds(
     }
     let old: std::collections::HashSet<u32> =
         crate::geometry::fold_edges(start).into_iter().collect();
-    let targets: Vec<u32> = crate::geometry::fold_edges(out)
+    let folds: Vec<u32> = crate::geometry::fold_edges(out)
         .into_iter()
         .filter(|e| !old.contains(e))
         .collect();
-    if targets.is_empty() {
+    // Corners below 1° (what the objective phase's shape floor allows at most) that the
+    // start did not have.
+    let min_corner = crate::geometry::SLIVER_DEGREES.to_radians();
+    let (small0, small) = (
+        crate::geometry::min_corner_angles(start),
+        crate::geometry::min_corner_angles(out),
+    );
+    let slivers: Vec<u32> = (0..out.num_faces())
+        .filter(|&f| small[f] < min_corner && small0[f] >= min_corner)
+        .map(|f| f as u32)
+        .collect();
+    if folds.is_empty() && slivers.is_empty() {
         return Ok(None);
     }
-    let done = super::unfold::unfold(
-        out,
-        out.positions(),
-        &targets,
+    let task = super::unfold::Task {
+        folds: &folds,
+        slivers: &slivers,
+        min_corner,
         movable,
-        &constrained,
-        tol,
-        control,
-    )?;
+        constrained: &constrained,
+        tolerance: tol,
+    };
+    let done = super::unfold::unfold(out, out.positions(), &task, control)?;
     Ok(out
         .with_positions(done.positions)
         .ok()
