@@ -159,7 +159,7 @@
 //!   mh_female_casualsuit02 214 → 85 and 24 → 23, mh_female_sportsuit01 18 → 3 and 12 → 9,
 //!   gc_tee_sim 10 → 1, mh_classicshoes_medium 10 → 2 (its input has 12), the unconverged
 //!   mh_male_worksuit01 13 → 3 and 12 → 8; ϖ_max stays ≤ 1e-6 on every converged one, for
-//!   0.3–4 s more.
+//!   1.3–4.3 s more (t-shirt 3.2 → 4.5 s, casualsuit 5.7 → 10.0 s; single runs, 2-core EPYC).
 //! - Closed components whose Euler characteristic χ ≠ 0 cannot become flattenable
 //!   (Gauss–Bonnet: the angle defects sum to 2πχ); their vertices are held fixed and reported
 //!   as stuck, and the run ends with `converged: false`.

@@ -58,18 +58,20 @@ use serde::Serialize;
 use std::f64::consts::{PI, TAU};
 
 /// Rings of neighbours around a fold's hinge that may move. Measured on the six converged
-/// shared garments with new folds (issue 12 note): 2, 3, 4, 3 then 5, 2 then 4 and three
-/// passes all left 133–142 of their 398 new folds; 3 alone was the cheapest.
+/// shared garments with new folds, with a first version of the objective (issue 12 note):
+/// 2, 3, 4, 3 then 5, 2 then 4, and three passes over the folds, all left 133–142 of their 398
+/// new folds; 3 alone was the cheapest.
 const RINGS: usize = 3;
 /// Most vertices a region may move (a regular mesh's 3 rings hold 50–70; the dense KKT
-/// system has about four unknowns per vertex, so this bounds it near 500 × 500, 2 MB), and
+/// system has about five unknowns per vertex, so this bounds it near 600 × 600, 3 MB), and
 /// most vertices its breadth-first search may reach (16 times that bounds the corners of the
 /// rows' fans): a hub of 60k long fan triangles would otherwise ask for a 460 GB matrix.
 const MAX_REGION: usize = 120;
 const MAX_REGION_REACH: usize = 1000;
 /// Most folds tried per mesh (a crumpled mesh has thousands; each costs a few dense solves).
 const MAX_TARGETS: usize = 2000;
-/// Iterations per region.
+/// Iterations per region: 60 left one of the test strip's four crease edges folded; on the
+/// garments the totals were alike.
 const MAX_ITERATIONS: usize = 200;
 /// Re-solves against the rows' residual after a trial.
 const MAX_CORRECTIONS: usize = 6;
@@ -97,7 +99,7 @@ const MARGIN: f64 = PI / 18.0;
 /// What [`unfold`] did.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Unfolded {
-    /// The positions, moved only where a fold was opened.
+    /// The positions, moved only where a fold or sliver was repaired.
     pub positions: Vec<[f64; 3]>,
     /// The figures for the report.
     pub summary: Summary,
@@ -224,7 +226,7 @@ fn repair(
     control: &dyn Control,
 ) -> Result<(), AlgoError> {
     let pending = |p: &[[f64; 3]], seed: &Seed| match *seed {
-        Seed::Fold(q) => hinge_angle(p, q) > FOLD_ANGLE,
+        Seed::Fold(q) => is_fold(p, q),
         Seed::Sliver(f) => smallest_of(mesh, p, f) < task.min_corner,
     };
     for seed in seeds {
@@ -262,6 +264,38 @@ fn repair(
         }
     }
     Ok(())
+}
+
+/// Add w r² (r a residual with gradient `g` per slot, NONE: a fixed vertex) to the
+/// Gauss–Newton model: w g gᵀ into `k`, −w r g into `rhs`.
+fn add_term(
+    k: &mut faer::Mat<f64>,
+    rhs: &mut [f64],
+    slots: &[u32],
+    g: &[[f64; 3]],
+    r: f64,
+    w: f64,
+) {
+    for (a, &sa) in slots.iter().enumerate() {
+        if sa == NONE {
+            continue;
+        }
+        let sa = 3 * sa as usize;
+        for i in 0..3 {
+            rhs[sa + i] -= w * r * g[a][i];
+        }
+        for (b, &sb) in slots.iter().enumerate() {
+            if sb == NONE {
+                continue;
+            }
+            let sb = 3 * sb as usize;
+            for i in 0..3 {
+                for j in 0..3 {
+                    k[(sa + i, sb + j)] += w * g[a][i] * g[b][j];
+                }
+            }
+        }
+    }
 }
 
 /// What a region is built around.
@@ -302,6 +336,22 @@ fn hinge_of(mesh: &Mesh, e: u32) -> Option<[u32; 4]> {
     };
     let apex = |t: [u32; 3]| t.into_iter().find(|&x| x != i && x != j);
     Some([i, j, apex(t0)?, apex(t1)?])
+}
+
+/// Whether hinge q folds at `pos`, by the same test as `geometry::fold_edges` (unit normals'
+/// dot product below cos 120°; the faces' corners taken in another rotation, which can differ
+/// in the last bits only).
+fn is_fold(pos: &[[f64; 3]], q: [u32; 4]) -> bool {
+    let [i, j, k, l] = q.map(|v| pos[v as usize]);
+    let n1 = crate::geometry::normalize(crate::mesh::cross(
+        crate::mesh::sub(j, i),
+        crate::mesh::sub(k, i),
+    ));
+    let n2 = crate::geometry::normalize(crate::mesh::cross(
+        crate::mesh::sub(i, j),
+        crate::mesh::sub(l, j),
+    ));
+    crate::mesh::dot(n1, n2) < FOLD_ANGLE.cos()
 }
 
 fn hinge_angle(pos: &[[f64; 3]], q: [u32; 4]) -> f64 {
@@ -516,19 +566,11 @@ impl Region {
                 }
             })
             .collect();
-        let folds = |p: &[[f64; 3]]| {
-            self.hinges
-                .iter()
-                .filter(|(q, _)| hinge_angle(p, *q) > FOLD_ANGLE)
-                .count()
-        };
+        let folds = |p: &[[f64; 3]]| self.hinges.iter().filter(|(q, _)| is_fold(p, *q)).count();
         let smallest = |p: &[[f64; 3]]| {
-            self.faces.iter().fold(f64::INFINITY, |s, &f| {
-                let [a, b, d] = mesh.triangles()[f as usize].map(|v| p[v as usize]);
-                s.min(corner_angle(a, b, d))
-                    .min(corner_angle(b, d, a))
-                    .min(corner_angle(d, a, b))
-            })
+            self.faces
+                .iter()
+                .fold(f64::INFINITY, |s, &f| s.min(smallest_of(mesh, p, f)))
         };
         let corner_at = |p: &[[f64; 3]], f: u32, k: usize| {
             let t = mesh.triangles()[f as usize];
@@ -623,102 +665,42 @@ impl Region {
                     rhs[3 * s + i] = -CLOSENESS * (work[v as usize][i] - x0[s][i]) / h;
                 }
             }
+            // Gauss–Newton terms w r², gradients in units of h̄.
             for ((q, slots), &t) in self.hinges.iter().zip(&targets) {
                 let p = q.map(|v| work[v as usize]);
                 let (phi, g) = turning_angle_gradient(p[0], p[1], p[2], p[3]);
-                let res = phi - t;
-                if res <= 0.0 {
-                    continue;
-                }
-                for a in 0..4 {
-                    let sa = slots[a];
-                    if sa == NONE {
-                        continue;
-                    }
-                    for i in 0..3 {
-                        rhs[3 * sa as usize + i] -= res * g[a][i] * h;
-                    }
-                    for b in 0..4 {
-                        let sb = slots[b];
-                        if sb == NONE {
-                            continue;
-                        }
-                        for i in 0..3 {
-                            for j in 0..3 {
-                                kmat[(3 * sa as usize + i, 3 * sb as usize + j)] +=
-                                    g[a][i] * g[b][j] * h * h;
-                            }
-                        }
-                    }
+                if phi > t {
+                    let g = g.map(|x| x.map(|y| y * h));
+                    add_term(&mut kmat, &mut rhs, slots, &g, phi - t, 1.0);
                 }
             }
             for ((&fc, slots), t) in self.faces.iter().zip(&self.face_slots).zip(&corner_targets) {
                 let tri = mesh.triangles()[fc as usize];
                 for k in 0..3 {
                     let p = [0, 1, 2].map(|x| work[tri[(k + x) % 3] as usize]);
-                    let res = t[k] - corner_angle(p[0], p[1], p[2]);
-                    if res <= 0.0 {
-                        continue;
-                    }
-                    // r = t − α: ∇r = −∇α.
-                    let (gb, gc) = corner_angle_gradient(p[0], p[1], p[2]);
-                    let g = [
-                        [0, 1, 2].map(|i| gb[i] + gc[i]),
-                        gb.map(|x| -x),
-                        gc.map(|x| -x),
-                    ];
-                    let sl = [0, 1, 2].map(|x| slots[(k + x) % 3]);
-                    for a in 0..3 {
-                        if sl[a] == NONE {
-                            continue;
-                        }
-                        for i in 0..3 {
-                            rhs[3 * sl[a] as usize + i] -= res * g[a][i] * h;
-                        }
-                        for b in 0..3 {
-                            if sl[b] == NONE {
-                                continue;
-                            }
-                            for i in 0..3 {
-                                for j in 0..3 {
-                                    kmat[(3 * sl[a] as usize + i, 3 * sl[b] as usize + j)] +=
-                                        g[a][i] * g[b][j] * h * h;
-                                }
-                            }
-                        }
+                    let alpha = corner_angle(p[0], p[1], p[2]);
+                    if alpha < t[k] {
+                        // r = t − α: ∇r = −∇α.
+                        let (gb, gc) = corner_angle_gradient(p[0], p[1], p[2]);
+                        let g = [
+                            [0, 1, 2].map(|i| gb[i] + gc[i]),
+                            gb.map(|x| -x),
+                            gc.map(|x| -x),
+                        ]
+                        .map(|x| x.map(|y| y * h));
+                        let sl = [0, 1, 2].map(|x| slots[(k + x) % 3]);
+                        add_term(&mut kmat, &mut rhs, &sl, &g, t[k] - alpha, 1.0);
                     }
                 }
             }
-            // Stretch: residual (l − l⁰)/h̄, gradient ±u (unit edge direction) in units of h̄.
+            // Stretch: r = (l − l⁰)/h̄, gradient ±u (the unit edge direction).
             for ((e, slots), &l0) in self.edges.iter().zip(&rest) {
                 let d = crate::mesh::sub(work[e[0] as usize], work[e[1] as usize]);
                 let l = crate::mesh::dot(d, d).sqrt();
-                if l == 0.0 || stretch_weight == 0.0 {
-                    continue;
-                }
-                let u = d.map(|x| x / l);
-                let res = (l - l0) / h;
-                let g = [u, u.map(|x| -x)];
-                for a in 0..2 {
-                    let sa = slots[a];
-                    if sa == NONE {
-                        continue;
-                    }
-                    for i in 0..3 {
-                        rhs[3 * sa as usize + i] -= stretch_weight * res * g[a][i];
-                    }
-                    for b in 0..2 {
-                        let sb = slots[b];
-                        if sb == NONE {
-                            continue;
-                        }
-                        for i in 0..3 {
-                            for j in 0..3 {
-                                kmat[(3 * sa as usize + i, 3 * sb as usize + j)] +=
-                                    stretch_weight * g[a][i] * g[b][j];
-                            }
-                        }
-                    }
+                if l > 0.0 && stretch_weight > 0.0 {
+                    let u = d.map(|x| x / l);
+                    let g = [u, u.map(|x| -x)];
+                    add_term(&mut kmat, &mut rhs, slots, &g, (l - l0) / h, stretch_weight);
                 }
             }
             for (row, fan) in self.fans.iter().enumerate() {
