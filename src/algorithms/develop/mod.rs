@@ -118,9 +118,9 @@ pub struct Params {
     pub levels: usize,
     /// Tolerances (radians) at which D[M] is reported.
     pub d_tolerance: Vec<f64>,
-    /// `sqp`: open the folds of a flattenable result that the start did not have (edges whose
-    /// normals turn past 120°), moving their neighbourhoods along θ = 2π (the `unfold`
-    /// module; beyond the papers).
+    /// `sqp`: repair the folds (edges whose normals turn past 120°), then the corners below 1°,
+    /// of a flattenable result that the start did not have, moving their neighbourhoods along
+    /// θ = 2π (the `unfold` module; beyond the papers).
     pub unfold: bool,
 }
 
@@ -408,8 +408,8 @@ pub struct Summary {
     pub history: Vec<HistoryEntry>,
     /// `loop`: Su et al.'s Table 1.
     pub table: Option<LoopTable>,
-    /// `sqp` with `unfold`, when the result had folds the start did not: what opening them
-    /// did (fold counts of the whole mesh).
+    /// `sqp` with `unfold`, when the result had folds or corners below 1° the start did not:
+    /// what repairing them did (counts of the whole mesh).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub unfold: Option<super::unfold::Summary>,
 }
@@ -547,10 +547,10 @@ pub fn run(
 }
 
 /// The folds and slivers (a corner below 1°) of a flattenable `out` that `start` did not
-/// have, repaired where that keeps every
-/// constrained vertex within the tolerance ([`super::unfold::unfold`]); None when there were
-/// none, or the result is not flattenable (the unfolding keeps each vertex where it was, but
-/// a stalled run's answer is the best iterate, which is left as it is).
+/// have, repaired where that keeps every constrained vertex within the tolerance
+/// ([`super::unfold::unfold`]); None when there were none, or the result is not flattenable
+/// (the unfolding keeps each vertex where it was, but a stalled run's answer is the best
+/// iterate, which is left as it is).
 fn open_new_folds(
     start: &Mesh,
     out: &Mesh,
