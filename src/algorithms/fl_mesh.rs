@@ -308,8 +308,9 @@ pub struct Params {
     /// alone, then from the best result, each run with its own `max_iterations` (see
     /// [`solve`]).
     pub retry: bool,
-    /// Open the folds the run made (edges whose normals turn past 120° that the input did not
-    /// fold) by moving their neighbourhoods along θ = 2π (the `unfold` module). Not with
+    /// Repair the folds the run made (edges whose normals turn past 120° that the input did
+    /// not fold), then its faces with a corner below `min_angle` that the input did not have,
+    /// by moving their neighbourhoods along θ = 2π (the `unfold` module). Not with
     /// `until = stationary`, whose answer is the paper's stationary point.
     pub unfold: bool,
 }
@@ -470,8 +471,8 @@ pub struct Report {
     /// first face. Empty otherwise.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub parts: Vec<PartReport>,
-    /// With `unfold`, when the run's result had folds the input did not: what opening them
-    /// did (the fold counts are the whole mesh's, the input's own folds included).
+    /// With `unfold`, when the run's result had folds or slivers the input did not: what
+    /// repairing them did (the counts are the whole mesh's, the input's own included).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub unfold: Option<super::unfold::Summary>,
 }
@@ -569,8 +570,8 @@ pub fn run(
 /// more (diffavatar_shirt_artist 1.4e-3 → 4.2e-4, mh_shoes01 1.3e-2 → 8.3e-3), and every
 /// mesh that converged whole is untouched.
 ///
-/// Unfolding (`unfold`, default on): the result's new folds are then opened where that keeps
-/// every interior vertex within the tolerance ([`open_new_folds`]).
+/// Unfolding (`unfold`, default on): the result's new folds and slivers are then repaired
+/// where that keeps every interior vertex within the tolerance ([`open_new_folds`]).
 pub fn solve(
     mesh: &Mesh,
     params: &Params,
@@ -647,6 +648,11 @@ fn open_new_folds(
     report.max_flattenability = wmax;
     report.stuck_vertices = stuck;
     report.unfold = Some(done.summary);
+    // The corrections may close rows the run left open (each stays below where it was).
+    if !report.converged && wmax <= params.tolerance {
+        report.converged = true;
+        report.stop_reason = format!("{}; flattenable after unfolding", report.stop_reason);
+    }
     Ok((unfolded, report))
 }
 
