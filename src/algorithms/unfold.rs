@@ -653,10 +653,14 @@ impl Region {
         let mut trial = work.clone();
         let mut ct = Vec::with_capacity(r);
         let mut best: Option<(usize, f64, Vec<[f64; 3]>)> = None;
+        // Assembled afresh every iteration, allocated once (the LU allocates its own).
+        let mut kmat = faer::Mat::<f64>::zeros(n, n);
+        let mut rhs = vec![0.0; n];
+        let mut corr = vec![0.0; n];
         for _ in 0..MAX_ITERATIONS {
             // K = [H + σI, Aᵀ; A, −εI] in units of h̄; right-hand side [−∇f; 2π − θ].
-            let mut kmat = faer::Mat::<f64>::zeros(n, n);
-            let mut rhs = vec![0.0; n];
+            kmat.fill(0.0);
+            rhs.fill(0.0);
             for i in 0..3 * m {
                 kmat[(i, i)] = CLOSENESS + sigma;
             }
@@ -724,9 +728,8 @@ impl Region {
                 }
             }
             let lu = kmat.partial_piv_lu();
-            let mut sol = rhs;
-            lu.solve_in_place(faer::MatMut::from_column_major_slice_mut(&mut sol, n, 1));
-            if sol.iter().any(|x| !x.is_finite()) {
+            lu.solve_in_place(faer::MatMut::from_column_major_slice_mut(&mut rhs, n, 1));
+            if rhs.iter().any(|x| !x.is_finite()) {
                 sigma *= 4.0;
                 if sigma > SIGMA_MAX {
                     break;
@@ -734,14 +737,14 @@ impl Region {
                 continue;
             }
             trial.copy_from_slice(&work);
-            self.place(&mut trial, &sol, h);
+            self.place(&mut trial, &rhs, h);
             // Back onto the rows with the same factorisation.
             for _ in 0..MAX_CORRECTIONS {
                 residual(&trial, &mut ct);
                 if ct.iter().zip(&bound).all(|(x, b)| x.abs() <= 0.5 * b) {
                     break;
                 }
-                let mut corr = vec![0.0; n];
+                corr[..3 * m].fill(0.0);
                 corr[3 * m..].copy_from_slice(&ct);
                 lu.solve_in_place(faer::MatMut::from_column_major_slice_mut(&mut corr, n, 1));
                 if corr.iter().any(|x| !x.is_finite()) {
