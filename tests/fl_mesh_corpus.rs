@@ -268,6 +268,55 @@ fn unfolding_opens_most_new_folds_on_garments() {
     }
 }
 
+/// pf_robert_shirt_14's penalised run stalls and the paper's model from the input converges
+/// crumpled (129 folded edges measured); the paper's model started from the penalised result
+/// instead converges with far fewer (20), and that is what is returned. Measured here against
+/// an independent run of the paper's model from the input, unfolding off in both.
+#[test]
+fn the_papers_model_from_the_penalised_result_is_kept_when_it_folds_less() {
+    let Some(root) = shared_root() else { return };
+    let (mesh, _) =
+        flatmesh::io::load_path(&root.join("garment/pf_robert_shirt_14.obj")).expect("loads");
+    let plain = Params {
+        shape_penalty: 0.0,
+        unfold: false,
+        ..Params::default()
+    };
+    let (paper, _) = fl_mesh::solve(&mesh, &plain, &Silent::default()).expect("runs");
+    let params = Params {
+        unfold: false,
+        ..Params::default()
+    };
+    let (out, report) = fl_mesh::solve(&mesh, &params, &Silent::default()).expect("runs");
+    let m = corpus::measure(&mesh, &out);
+    let p = corpus::measure(&mesh, &paper);
+    assert!(m.varpi_out <= 1e-6, "ϖ_max {:e}", m.varpi_out);
+    assert!(
+        p.varpi_out <= 1e-6,
+        "paper's model: ϖ_max {:e}",
+        p.varpi_out
+    );
+    assert!(
+        report
+            .stop_reason
+            .contains("from the penalised result instead"),
+        "{}",
+        report.stop_reason
+    );
+    assert!(
+        2 * m.folds_out < p.folds_out,
+        "folds {} against the paper's model's {}",
+        m.folds_out,
+        p.folds_out
+    );
+    assert_eq!(report.history.len(), report.iterations);
+    for (v, kind) in mesh.conn().kinds().iter().enumerate() {
+        if *kind != VertexKind::Interior {
+            assert_eq!(out.positions()[v], mesh.positions()[v], "vertex {v}");
+        }
+    }
+}
+
 /// A penalised run that does not converge is followed by the paper's model from the input,
 /// whose result is kept because it converges: the noisy 7.7k-face saddle (the penalised run
 /// stalls near 1e-4 there with full-length normal steps, `step_radius = 0`; should it one day
