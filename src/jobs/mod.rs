@@ -152,7 +152,8 @@ impl Kind {
                  their best result, or a one-part mesh from its best result; each run gets \
                  max_iterations of its own), unfold=true|false (true: the folds, then the \
                  corners below min_angle, the run made are then repaired where that keeps \
-                 every vertex flattenable; not with until=stationary)"
+                 every vertex flattenable, and a run of the paper's model that converged by \
+                 folding is run again from the penalised result; not with until=stationary)"
             }
             Kind::Subdivide => {
                 "levels (1; or --levels), curves (or --curves), split_ratio (0.5), \
