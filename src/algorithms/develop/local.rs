@@ -10,8 +10,8 @@
 //!   r′ = dr/dδ = −(∂θ/∂q)·n_q (Props. 1–2), accepted only if T falls by at least 1e-4 of
 //!   the decrease its slope predicts and by at least 0.1 % of T (the change is halved up to
 //!   five times first; a move whose quadratic model promises less than a quarter of that
-//!   0.1 % is refused untried, `PROMISE`). A move changes g only at q and its ring, which is all of T, so G
-//!   falls with every move.
+//!   0.1 % is refused untried, `PROMISE`). A move changes g only at q and its ring, which is
+//!   all of T, so G falls with every move.
 //!   ω = `relaxation` (default 1.8): with ω = 1 each move minimises T along the normal, a
 //!   Gauss–Seidel sweep on G that zigzags; over-relaxation is the classic cure. Measured on
 //!   the noisy cone fixture (ε = 1e-4, δ_T = L̄): ω = 1 ran out of 500000 pops at 2.2e-4,
