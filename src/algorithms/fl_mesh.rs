@@ -1211,13 +1211,17 @@ fn plain_from_best(
         .chain(&best.positions()[n..])
         .copied()
         .collect();
-    let (out3, mut third) = solve_phase(
+    // Stopped (cancel or time limit) during this optional run: keep the run from the input.
+    let (out3, mut third) = match solve_phase(
         best,
         plain,
         keep,
         Some(&anchors),
         &Renamed::after(control, "no shape penalty, from the penalised result"),
-    )?;
+    ) {
+        Err(AlgoError::Cancelled) => return Ok(None),
+        other => other?,
+    };
     let folds3 = crate::geometry::fold_edges(&out3).len();
     if !third.converged || folds3 >= folds {
         return Ok(None);
