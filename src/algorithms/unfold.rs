@@ -257,6 +257,12 @@ fn repair(
             Seed::Fold(q) => q,
             Seed::Sliver(f) => &mesh.triangles()[*f as usize],
         };
+        let Some(region) = Region::new(mesh, vertices, RINGS, task, scratch) else {
+            continue; // a neighbourhood too large for a dense solve (a hub of long fans)
+        };
+        if region.verts.is_empty() {
+            continue;
+        }
         // A fold first by bending (lengths held), then, where that did not open it, freely.
         let weights: &[f64] = match seed {
             Seed::Fold(_) => &[STRETCH, 0.0],
@@ -264,12 +270,6 @@ fn repair(
         };
         for &stretch in weights {
             if !pending(&out.positions, seed) {
-                break;
-            }
-            let Some(region) = Region::new(mesh, vertices, RINGS, task, scratch) else {
-                break; // a neighbourhood too large for a dense solve (a hub of long fans)
-            };
-            if region.verts.is_empty() {
                 break;
             }
             if let Some(moved) = region.open(mesh, &out.positions, task, seed, h, stretch) {
