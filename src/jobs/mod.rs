@@ -179,7 +179,12 @@ impl Kind {
                  and the SQP again from its result, with max_iterations of its own), \
                  unfold=true|false (sqp: true; a flattenable result's new folds and corners \
                  below 1 degree are repaired along the constraints), eta \
-                 (penalty_cg: 1e-4), cg_steps (penalty_cg: 5), delta_t (local: the mean edge \
+                 (penalty_cg: 1e-4), cg_steps (penalty_cg: 5), rho_growth (penalty_cg: 1, the \
+                 paper's schedule; > 1: rho grows at least that much a phase, eta then relative \
+                 to the last G), preconditioner=none|gauss_newton (penalty_cg: none; \
+                 gauss_newton: each phase's CG preconditioned by the Gauss-Newton Hessian of \
+                 the penalty, with rho_growth 2 it reaches the constraint where the paper's \
+                 stalls, no shape guard), delta_t (local: the mean edge \
                  length), max_moves (local: 500000), update=gauss_newton|newton (local: \
                  gauss_newton), relaxation (local gauss_newton: 1.8), levels (loop: 1)"
             }

@@ -60,6 +60,18 @@ pub enum Solver {
     PenaltyCg,
 }
 
+/// The preconditioner of `penalty_cg`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Preconditioner {
+    /// Plain nonlinear CG, as the paper.
+    #[default]
+    None,
+    /// P = E's Gauss–Newton Hessian + 2ρG ΛᵀΛ + a small closeness and a graph Laplacian,
+    /// factorised once per phase (beyond the paper).
+    GaussNewton,
+}
+
 /// The update of `local`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize)]
 #[serde(rename_all = "snake_case")]
@@ -91,6 +103,11 @@ pub struct Params {
     pub eta: f64,
     /// `penalty_cg`: CG steps per ρ.
     pub cg_steps: usize,
+    /// `penalty_cg`: least growth γ of ρ from one phase to the next (ρ_k ≥ γ ρ_{k−1}, and
+    /// η then relative to the last G); 1: the paper's schedule, whose ρ_k G_k² is fixed.
+    pub rho_growth: f64,
+    /// `penalty_cg`: `none` (the paper's plain CG) or `gauss_newton` (see the `cg` module).
+    pub preconditioner: Preconditioner,
     /// `sqp`: weight μ of Σ|v − v⁰|² beside E (both over h̄²).
     pub closeness: f64,
     /// `sqp`: weight κ of the displacement's Dirichlet energy Σ_e |d_a − d_b|² beside E
@@ -134,6 +151,8 @@ impl Default for Params {
             fix_boundary: false,
             eta: 1e-4,
             cg_steps: 5,
+            rho_growth: 1.0,
+            preconditioner: Preconditioner::None,
             closeness: 1e-2,
             smoothness: 10.0,
             step_tolerance: 1e-4,
@@ -169,6 +188,9 @@ impl Params {
         }
         if !(self.eta > 0.0 && self.eta < 1.0) {
             return Err(bad("eta", "must be in (0, 1)"));
+        }
+        if !(self.rho_growth >= 1.0 && self.rho_growth <= 1e3) {
+            return Err(bad("rho_growth", "must be in [1, 1000]"));
         }
         if !(1..=1000).contains(&self.cg_steps) {
             return Err(bad("cg_steps", "must be in 1..=1000"));

@@ -84,7 +84,7 @@ use crate::mesh::{dot, is_degenerate_triangle, sub, Mesh, NONE};
 
 /// The (2,2) block's floor −εI: keeps the system solvable where a constraint's gradient
 /// vanishes (a planar vertex, where θ is stationary at 2π), biasing θ by at most ε|y|.
-const REGULARISATION: f64 = 1e-10;
+pub(super) const REGULARISATION: f64 = 1e-10;
 /// Levenberg–Marquardt damping λ of the (2,2) block, −(ε + λ)I: the step then minimises
 /// ½δᵀHδ + ∇f·δ + |Λδ − (2π − θ)|²/(2λ), so a large λ shortens the part of the step that
 /// chases the constraints where their linearisation is poor; λ → 0 is the exact SQP step.
@@ -476,7 +476,7 @@ fn evaluate(
 }
 
 /// The KKT system of one mesh: fixed pattern, symbolic factorisation, value slots.
-struct Kkt {
+pub(super) struct Kkt {
     /// Movable vertices (slot s ↔ vertex verts[s]) and constrained ones (row c ↔ cons[c]).
     verts: Vec<u32>,
     cons: Vec<u32>,
@@ -499,7 +499,7 @@ struct Kkt {
 }
 
 impl Kkt {
-    fn new(model: &Model<'_>, movable: &[bool]) -> Result<Self, AlgoError> {
+    pub(super) fn new(model: &Model<'_>, movable: &[bool]) -> Result<Self, AlgoError> {
         let mesh = model.mesh();
         let nv = mesh.num_vertices();
         let mut slot = vec![NONE; nv];
@@ -603,7 +603,7 @@ impl Kkt {
     }
 
     /// H (Gauss–Newton, times h̄²) and h̄Λ at `pos`, then the numeric factorisation.
-    fn fill(
+    pub(super) fn fill(
         &mut self,
         model: &Model<'_>,
         pos: &[[f64; 3]],
@@ -703,6 +703,36 @@ impl Kkt {
             .solve_in_place(rhs)
             .map_err(|e| AlgoError::Input(format!("KKT solve: {e}")))?;
         self.step.copy_from_slice(&self.rhs[..m3]);
+        Ok(())
+    }
+
+    /// x = P⁻¹ r for P = H + 2μI + (h̄²/ε) ΛᵀΛ, with −ε the (2,2) block as filled: the upper
+    /// block of the KKT solve for [r; 0] (eliminating y = (h̄Λ x)/ε). Vertices that do not move
+    /// get 0.
+    pub(super) fn precondition(
+        &mut self,
+        r: &[[f64; 3]],
+        out: &mut [[f64; 3]],
+    ) -> Result<(), AlgoError> {
+        let dim = self.rhs.len() / 2;
+        let rhs = &mut self.rhs[..dim];
+        rhs.fill(0.0);
+        for (s, &v) in self.verts.iter().enumerate() {
+            for k in 0..3 {
+                rhs[3 * s + k] = r[v as usize][k];
+            }
+        }
+        self.solver
+            .solve_in_place(rhs)
+            .map_err(|e| AlgoError::Input(format!("KKT solve: {e}")))?;
+        for o in out.iter_mut() {
+            *o = [0.0; 3];
+        }
+        for (s, &v) in self.verts.iter().enumerate() {
+            for k in 0..3 {
+                out[v as usize][k] = self.rhs[3 * s + k];
+            }
+        }
         Ok(())
     }
 
