@@ -29,7 +29,7 @@
 //!   Levenberg–Marquardt trust region σ (÷3 after a taken step, ×4 after a refused one), and
 //!   up to [`MAX_CORRECTIONS`] re-solves with the same factorisation against the rows'
 //!   residual at the trial, as develop's objective phase does. Regions hold 50–70 vertices
-//!   (about 300 unknowns), so a dense LU (faer) is exact and takes about a millisecond; the
+//!   (about 300 unknowns), so a dense LU (faer, on this thread: `linalg::DenseLu`) is exact and takes about a millisecond; the
 //!   sparse machinery would buy little here. At most [`MAX_TARGETS`] folds are tried.
 //! - A trial is taken only when every row keeps |2π − θ| within max(tolerance / 2, its value
 //!   at the start), the objective falls, no triangle degenerates, the region's fold count does
@@ -54,7 +54,6 @@ use crate::geometry::{
     SLIVER_DEGREES,
 };
 use crate::mesh::{is_degenerate_triangle, Mesh, NONE};
-use faer::linalg::solvers::Solve;
 use serde::Serialize;
 use std::f64::consts::{PI, TAU};
 
@@ -689,12 +688,13 @@ impl Region {
         let mut trial = work.clone();
         let mut ct = Vec::with_capacity(r);
         let mut best: Option<(usize, f64, Vec<[f64; 3]>)> = None;
-        // Assembled afresh every iteration, allocated once (the LU allocates its own).
-        let mut kmat = faer::Mat::<f64>::zeros(n, n);
+        // Assembled afresh every iteration into the LU's buffer, allocated once.
+        let mut lu = crate::linalg::DenseLu::new(n);
         let mut rhs = vec![0.0; n];
         let mut corr = vec![0.0; n];
         for _ in 0..MAX_ITERATIONS {
             // K = [H + σI, Aᵀ; A, −εI] in units of h̄; right-hand side [−∇f; 2π − θ].
+            let kmat = lu.matrix();
             kmat.fill(0.0);
             rhs.fill(0.0);
             for i in 0..3 * m {
@@ -711,7 +711,7 @@ impl Region {
                 let (phi, g) = turning_angle_gradient(p[0], p[1], p[2], p[3]);
                 if phi > t {
                     let g = g.map(|x| x.map(|y| y * h));
-                    add_term(&mut kmat, &mut rhs, slots, &g, phi - t, 1.0);
+                    add_term(kmat, &mut rhs, slots, &g, phi - t, 1.0);
                 }
             }
             for ((&fc, slots), t) in self.faces.iter().zip(&self.face_slots).zip(&corner_targets) {
@@ -729,7 +729,7 @@ impl Region {
                         ]
                         .map(|x| x.map(|y| y * h));
                         let sl = [0, 1, 2].map(|x| slots[(k + x) % 3]);
-                        add_term(&mut kmat, &mut rhs, &sl, &g, t[k] - alpha, 1.0);
+                        add_term(kmat, &mut rhs, &sl, &g, t[k] - alpha, 1.0);
                     }
                 }
             }
@@ -740,7 +740,7 @@ impl Region {
                 if l > 0.0 && stretch_weight > 0.0 {
                     let u = d.map(|x| x / l);
                     let g = [u, u.map(|x| -x)];
-                    add_term(&mut kmat, &mut rhs, slots, &g, (l - l0) / h, stretch_weight);
+                    add_term(kmat, &mut rhs, slots, &g, (l - l0) / h, stretch_weight);
                 }
             }
             for (row, fan) in self.fans.iter().enumerate() {
@@ -763,8 +763,8 @@ impl Region {
                     }
                 }
             }
-            let lu = kmat.partial_piv_lu();
-            lu.solve_in_place(faer::MatMut::from_column_major_slice_mut(&mut rhs, n, 1));
+            lu.factor();
+            lu.solve_in_place(&mut rhs);
             if rhs.iter().any(|x| !x.is_finite()) {
                 sigma *= 4.0;
                 if sigma > SIGMA_MAX {
@@ -784,7 +784,7 @@ impl Region {
                 for ((x, &r), &a) in corr[3 * m..].iter_mut().zip(&ct).zip(&held) {
                     *x = r - HELD_INSIDE * a;
                 }
-                lu.solve_in_place(faer::MatMut::from_column_major_slice_mut(&mut corr, n, 1));
+                lu.solve_in_place(&mut corr);
                 if corr.iter().any(|x| !x.is_finite()) {
                     break;
                 }
