@@ -161,6 +161,10 @@
 //!   gc_tee_sim 10 → 1, mh_classicshoes_medium 10 → 2 (its input has 12), the unconverged
 //!   mh_male_worksuit01 13 → 3 and 12 → 8; ϖ_max stays ≤ 1e-6 on every converged one, for
 //!   1.3–4.3 s more (t-shirt 3.2 → 4.5 s, casualsuit 5.7 → 10.0 s; single runs, 2-core EPYC).
+//!   Since (issue 12 note of 2026-11-27: the retry from the penalised run, the length-free
+//!   second attempt, sliver corners weighted 100): t-shirt 18 → 1 and 2 → 1, robert 20 → 1 and
+//!   4 → 4, casualsuit 214 → 73 and 24 → 12, sportsuit 18 → 0 and 12 → 0, gc_tee_sim 10 → 0,
+//!   classicshoes 10 → 2.
 //! - Closed components whose Euler characteristic χ ≠ 0 cannot become flattenable
 //!   (Gauss–Bonnet: the angle defects sum to 2πχ); their vertices are held fixed and reported
 //!   as stuck, and the run ends with `converged: false`.
