@@ -55,6 +55,9 @@ use crate::algorithms::{AlgoError, Control, Progress};
 const C1: f64 = 1e-4;
 const C2: f64 = 0.1;
 const MAX_EVALUATIONS: usize = 20;
+/// ρ stays finite however long it grows (`rho_growth` 1000 would pass f64's range in 103
+/// phases); J and its gradient stay finite with it for any G a run can have.
+const RHO_MAX: f64 = 1e250;
 /// `gauss_newton` preconditioner: weight μ of the 2μI that makes E's Gauss–Newton Hessian
 /// definite (rigid motions and isometric bendings leave E unchanged).
 const PRECONDITIONER_CLOSENESS: f64 = 1e-3;
@@ -86,19 +89,21 @@ pub(super) fn run(
     let mut big_gk = g0;
     let mut best_g = g0;
     let mut prev_rho = 0.0_f64;
-    let mut kkt = match params.preconditioner {
-        Preconditioner::None => None,
-        Preconditioner::GaussNewton => Some(Kkt::new(model, movable)?),
-    };
     if run.g_max <= tol || g0 == 0.0 {
         run.stop = Stop::Tolerance;
         return Ok(run);
     }
+    let mut kkt = match params.preconditioner {
+        Preconditioner::None => None,
+        Preconditioner::GaussNewton => Some(Kkt::new(model, movable)?),
+    };
     for k in 1..=params.max_iterations {
         if control.cancelled() {
             return Err(AlgoError::Cancelled);
         }
-        let rho = (sum_l0_sq / (ne * big_gk * big_gk)).max(prev_rho * params.rho_growth);
+        let rho = (sum_l0_sq / (ne * big_gk * big_gk))
+            .max(prev_rho * params.rho_growth)
+            .min(RHO_MAX);
         prev_rho = rho;
         if let Some(kkt) = kkt.as_mut() {
             // P's penalty block is the Gauss–Newton part ρG·2ΛᵀΛ of (ρ/2)G²'s Hessian; the
