@@ -20,18 +20,18 @@
 //!   sharpen past where it was to absorb the fold, and one close to 120° is pushed below it
 //!   before a step tips it over), ½ Σ_c (α⁰_c − α_c)₊² over the region's corners (α⁰ =
 //!   min(10°, the corner at the start); 1.5 times the minimum, with weight [`SLIVER_WEIGHT`],
-//!   for a corner below it), ½ Σ_e
-//!   (l_e − l⁰_e)²/h̄² over its edges for a fold (bend, don't stretch; a fold that bending
-//!   did not open is tried once more without it; a sliver's repair is a change of lengths,
-//!   so not there), and ½ μ |x − x⁰|²/h̄², a small pull to the start that makes the
+//!   for a corner below it), ½ Σ_e (l_e − l⁰_e)²/h̄² over its edges for a fold (bend, don't
+//!   stretch; a fold that bending did not open is tried once more without it; a sliver's
+//!   repair is a change of lengths, so not there), and ½ μ |x − x⁰|²/h̄², a small pull to the start that makes the
 //!   Gauss–Newton Hessian regular.
 //! - Step: sequential quadratic programming on the dense KKT system
 //!   `[H + σI, Aᵀ; A, −εI]` (A = ∂θ/∂x of the rows, FL paper Props. 1–2) with a
 //!   Levenberg–Marquardt trust region σ (÷3 after a taken step, ×4 after a refused one), and
 //!   up to [`MAX_CORRECTIONS`] re-solves with the same factorisation against the rows'
 //!   residual at the trial, as develop's objective phase does. Regions hold 50–70 vertices
-//!   (about 300 unknowns), so a dense LU (faer, on this thread: `linalg::DenseLu`) is exact and takes about a millisecond; the
-//!   sparse machinery would buy little here. At most [`MAX_TARGETS`] folds are tried.
+//!   (about 300 unknowns), so a dense LU (faer, on this thread: `linalg::DenseLu`) is exact
+//!   and takes about a millisecond; the sparse machinery would buy little here. At most
+//!   [`MAX_TARGETS`] folds are tried.
 //! - A trial is taken only when every row keeps |2π − θ| within max(tolerance / 2, its value
 //!   at the start), the objective falls, no triangle degenerates, the region's fold count does
 //!   not grow and its smallest corner stays at or above min(1°, the region's smallest at the
@@ -625,29 +625,17 @@ impl Region {
                 p[t[(k + 2) % 3] as usize],
             )
         };
-        let corner_targets: Vec<[f64; 3]> = self
+        // Per face corner: (target, weight) of its term.
+        let corner_terms: Vec<[(f64, f64); 3]> = self
             .faces
             .iter()
             .map(|&f| {
                 [0, 1, 2].map(|k| {
                     let a = corner_at(pos, f, k);
                     if a < min_corner {
-                        SLIVER_MARGIN * min_corner
+                        (SLIVER_MARGIN * min_corner, SLIVER_WEIGHT)
                     } else {
-                        CORNER_ONSET.min(a)
-                    }
-                })
-            })
-            .collect();
-        let corner_weights: Vec<[f64; 3]> = self
-            .faces
-            .iter()
-            .map(|&f| {
-                [0, 1, 2].map(|k| {
-                    if corner_at(pos, f, k) < min_corner {
-                        SLIVER_WEIGHT
-                    } else {
-                        1.0
+                        (CORNER_ONSET.min(a), 1.0)
                     }
                 })
             })
@@ -669,10 +657,13 @@ impl Region {
             let corners: f64 = self
                 .faces
                 .iter()
-                .zip(corner_targets.iter().zip(&corner_weights))
-                .map(|(&f, (t, w))| {
+                .zip(&corner_terms)
+                .map(|(&f, terms)| {
                     (0..3)
-                        .map(|k| w[k] * (t[k] - corner_at(p, f, k)).max(0.0).powi(2))
+                        .map(|k| {
+                            let (t, w) = terms[k];
+                            w * (t - corner_at(p, f, k)).max(0.0).powi(2)
+                        })
                         .sum::<f64>()
                 })
                 .sum();
@@ -737,18 +728,14 @@ impl Region {
                     add_term(kmat, &mut rhs, slots, &g, phi - t, 1.0);
                 }
             }
-            for (((&fc, slots), t), w) in self
-                .faces
-                .iter()
-                .zip(&self.face_slots)
-                .zip(&corner_targets)
-                .zip(&corner_weights)
+            for ((&fc, slots), terms) in self.faces.iter().zip(&self.face_slots).zip(&corner_terms)
             {
                 let tri = mesh.triangles()[fc as usize];
                 for k in 0..3 {
                     let p = [0, 1, 2].map(|x| work[tri[(k + x) % 3] as usize]);
                     let alpha = corner_angle(p[0], p[1], p[2]);
-                    if alpha < t[k] {
+                    let (t, w) = terms[k];
+                    if alpha < t {
                         // r = t − α: ∇r = −∇α.
                         let (gb, gc) = corner_angle_gradient(p[0], p[1], p[2]);
                         let g = [
@@ -758,7 +745,7 @@ impl Region {
                         ]
                         .map(|x| x.map(|y| y * h));
                         let sl = [0, 1, 2].map(|x| slots[(k + x) % 3]);
-                        add_term(kmat, &mut rhs, &sl, &g, t[k] - alpha, w[k]);
+                        add_term(kmat, &mut rhs, &sl, &g, t - alpha, w);
                     }
                 }
             }
