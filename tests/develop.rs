@@ -945,6 +945,35 @@ fn sqp_on_a_shoe_is_made_flattenable_by_the_restoration() {
     assert!((ds - s.delta_s).abs() <= 1e-12, "{ds} vs {}", s.delta_s);
 }
 
+/// pf_robert_shirt_14, a whole shirt: the SQP stalls (g_max 3.8e-3 in 2026-11) and so does
+/// the restoration (fl-mesh without refinement, 1.5e-3), but lower, so the SQP runs again
+/// from the restoration's result, where it converges. Checked from the output's angles, and
+/// against the SQP alone (`restore = false`), which it must beat.
+#[test]
+fn an_unconverged_restoration_that_got_lower_is_a_start_for_the_sqp() {
+    let Some(mesh) = load_shared("garment/pf_robert_shirt_14.obj") else {
+        return;
+    };
+    let alone = Params {
+        restore: false,
+        ..Params::default()
+    };
+    let first = develop::run(&mesh, &alone, &Silent::default()).unwrap();
+    let g_alone = g_max_independent(&first.mesh.unwrap());
+    assert!(
+        g_alone > 1e-6,
+        "the SQP alone converged ({g_alone}): pick another mesh"
+    );
+    let out = develop::run(&mesh, &Params::default(), &Silent::default()).unwrap();
+    let (s, m) = flattenable_through_the_restoration(out);
+    assert!(
+        s.stop_detail.contains("lower than the SQP's"),
+        "{}",
+        s.stop_detail
+    );
+    assert!(g_max_independent(&m) < g_alone);
+}
+
 /// A pouch with its opening held (`fix_boundary`): its area is 11 times what any flat disk
 /// with that opening can have, so the SQP's steps, which stay near the input, stall; the
 /// restoration (fl-mesh, which starts it from the developable cone over the opening) gives
