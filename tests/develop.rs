@@ -974,6 +974,23 @@ fn an_unconverged_restoration_that_got_lower_is_a_start_for_the_sqp() {
     assert!(g_max_independent(&m) < g_alone);
 }
 
+/// mh_female_casualsuit02 (a whole suit): the first restoration round ends unconverged
+/// (g_max 5.4e-3 in 2026-11), the second, whose fl-mesh starts from that result, makes it
+/// flattenable. Checked from the output's angles.
+#[test]
+fn a_second_restoration_round_from_the_result_so_far_finishes_a_whole_suit() {
+    let Some(mesh) = load_shared("garment/mh_female_casualsuit02.obj") else {
+        return;
+    };
+    let out = develop::run(&mesh, &Params::default(), &Silent::default()).unwrap();
+    let (s, _) = flattenable_through_the_restoration(out);
+    assert!(
+        s.stop_detail.contains("restoration from the result so far"),
+        "{}",
+        s.stop_detail
+    );
+}
+
 /// A pouch with its opening held (`fix_boundary`): its area is 11 times what any flat disk
 /// with that opening can have, so the SQP's steps, which stay near the input, stall; the
 /// restoration (fl-mesh, which starts it from the developable cone over the opening) gives
