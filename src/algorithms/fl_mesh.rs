@@ -165,6 +165,17 @@
 //!   second attempt, sliver corners weighted 100): t-shirt 18 → 1 and 2 → 1, robert 20 → 1 and
 //!   4 → 4, casualsuit 214 → 73 and 24 → 12, sportsuit 18 → 0 and 12 → 0, gc_tee_sim 10 → 0,
 //!   classicshoes 10 → 2.
+//! - Detour through develop's SQP (`detour`, default on; [`detour`]). Whole garments (a sphere
+//!   with 3–11 holes, sleeves and legs joined to the body) stall with nearly every interior
+//!   vertex at the same small excess θ > 2π (mh_female_elegantsuit01's top: 2219 of 2227
+//!   vertices, ϖ 2–4e-3): by Gauss–Bonnet only the fixed openings can take that curvature up,
+//!   and Eq. 7's normal steps no longer lower ‖2π − θ‖ there (probed on GarmentTransfer's
+//!   t-shirt: the linearised violation after a full normal step was 0.999 of the violation,
+//!   the damped system's answer to a nearly singular mean mode). Such a result is run
+//!   through develop's SQP (boundary held) and fl-mesh once more from there; on unseen
+//!   garments (issue 12 note of 2026-11-27) two of six stalled tops then converge, and ϖ_max
+//!   falls on the rest (mh_male_worksuit01 0.145 → 2.3e-2). A second detour changed nothing
+//!   on the two suits tried, so there is one.
 //! - Closed components whose Euler characteristic χ ≠ 0 cannot become flattenable
 //!   (Gauss–Bonnet: the angle defects sum to 2πχ); their vertices are held fixed and reported
 //!   as stuck, and the run ends with `converged: false`.
@@ -320,6 +331,11 @@ pub struct Params {
     /// the penalised result (see [`solve`]). Not with `until = stationary`, whose answer
     /// is the paper's stationary point.
     pub unfold: bool,
+    /// A run that stalled (not one cut short by `max_iterations`) and is still unconverged
+    /// after the retries is run through `develop`'s SQP (edge
+    /// lengths kept, boundary and seams held) and fl-mesh once more from there, and replaced
+    /// when that lowers ϖ_max (see [`solve`]). Not with `until = stationary`.
+    pub detour: bool,
 }
 
 impl Default for Params {
@@ -345,6 +361,7 @@ impl Default for Params {
             cone_start: ConeStart::Auto,
             retry: true,
             unfold: true,
+            detour: true,
         }
     }
 }
@@ -580,6 +597,9 @@ pub fn run(
 /// more (diffavatar_shirt_artist 1.4e-3 → 4.2e-4, mh_shoes01 1.3e-2 → 8.3e-3), and every
 /// mesh that converged whole is untouched.
 ///
+/// Detour (`detour`, default on): a result still unconverged after a stall (not after a run
+/// cut short by `max_iterations`) and the retries is handed to [`detour`].
+///
 /// Unfolding (`unfold`, default on): the result's new folds and slivers are then repaired
 /// where that keeps every interior vertex within the tolerance ([`open_new_folds`]).
 pub fn solve(
@@ -589,6 +609,87 @@ pub fn solve(
 ) -> Result<(Mesh, Report), AlgoError> {
     let (out, report) = solve_retried(mesh, params, control)?;
     open_new_folds(mesh, out, report, params, control)
+}
+
+/// An unconverged result run through `develop`'s SQP (least change of its edge lengths along
+/// θ = 2π, boundary and seams held, no restoration), then fl-mesh once more (one run, no
+/// retries) from the SQP's result; the outcome replaces the result when it converged or
+/// lowered ϖ_max. The stalls it breaks are those of whole garments, where every interior
+/// vertex sits at a similar small excess θ > 2π that only the openings can absorb
+/// (Gauss–Bonnet) and Eq. 7's steps no longer lower ‖2π − θ‖: the SQP's Levenberg–Marquardt
+/// steps on E move the mesh off that point. Measured on unseen MakeHuman and GarmentTransfer
+/// garments (issue 12 note of 2026-11-27): GarmentTransfer's shirt 1.2e-4 and t-shirt 8.0e-4
+/// converge through it in 10 and 31 fl-mesh iterations. A stop or failure of either stage
+/// keeps the result.
+fn detour(
+    out: Mesh,
+    mut report: Report,
+    params: &Params,
+    control: &dyn Control,
+) -> Result<(Mesh, Report), AlgoError> {
+    if report.converged
+        || !params.detour
+        || report.free_vertices == 0
+        || impossible_vertices(&out).contains(&true)
+    {
+        return Ok((out, report));
+    }
+    let sqp = super::develop::Params {
+        fix_boundary: true,
+        restore: false,
+        unfold: false,
+        tolerance: Some(params.tolerance),
+        // Its own budget, as each retry's, within develop's default.
+        max_iterations: params
+            .max_iterations
+            .min(super::develop::Params::default().max_iterations),
+        ..super::develop::Params::default()
+    };
+    let polished = match super::develop::run(&out, &sqp, &Renamed::after(control, "sqp detour")) {
+        Ok(o) => o.mesh.map(|m| (m, o.summary.g_max_after)),
+        Err(e) => {
+            report.stop_reason =
+                format!("{}; detour through develop's SQP: {e}", report.stop_reason);
+            return Ok((out, report));
+        }
+    };
+    let Some((polished, g)) = polished else {
+        return Ok((out, report));
+    };
+    let inner = Params {
+        detour: false,
+        ..params.clone()
+    };
+    let (again, second) = match solve_clear_of(
+        &polished,
+        &inner,
+        None,
+        &Renamed::after(control, "after the sqp detour"),
+    ) {
+        Ok(done) => done,
+        Err(e) => {
+            report.stop_reason = format!(
+                "{}; detour through develop's SQP (g_max {g:.2e}), then fl-mesh: {e}",
+                report.stop_reason
+            );
+            return Ok((out, report));
+        }
+    };
+    if second.converged || second.max_flattenability < report.max_flattenability {
+        // The second run's numbering extends the first's (refinement appends).
+        let refined = report.refined.clone();
+        let mut chained = chain(report, second, |f, s| {
+            format!("{f}; then develop's SQP from the best result (boundary held, g_max {g:.2e}) and fl-mesh from there: {s}")
+        });
+        chained.refined = [refined, chained.refined].concat();
+        return Ok((again, chained));
+    }
+    absorb(&mut report, &second);
+    report.stop_reason = format!(
+        "{}; then develop's SQP from the best result (g_max {g:.2e}) and fl-mesh from there, which did not lower ϖ_max ({:.2e}: {})",
+        report.stop_reason, second.max_flattenability, second.stop_reason
+    );
+    Ok((out, report))
 }
 
 /// The result's folds and slivers (a corner below `min_angle`) that the input did not have
@@ -666,7 +767,7 @@ fn open_new_folds(
     Ok((unfolded, report))
 }
 
-/// [`solve`] before opening new folds: the whole run and its retries.
+/// [`solve`] before opening new folds: the whole run, its retries and the detour.
 fn solve_retried(
     mesh: &Mesh,
     params: &Params,
@@ -676,22 +777,26 @@ fn solve_retried(
     // Only a stall is retried: a run cut short by `max_iterations` was given its budget, and
     // `until = stationary` asks for the paper's stationary point of this run.
     if whole.converged
-        || !params.retry
         || params.until == Until::Stationary
         || whole.iterations >= params.max_iterations
     {
         return Ok((whole_out, whole));
     }
-    match parts::split(mesh) {
-        Some(split) => match retry_parts(mesh, &split, whole_out, whole, params, control) {
-            Ok(done) => Ok(done),
-            Err(back) => {
-                let (whole_out, whole) = *back;
-                restart(mesh, whole_out, whole, params, control)
-            }
-        },
-        None => restart(mesh, whole_out, whole, params, control),
-    }
+    let (out, report) = if !params.retry {
+        (whole_out, whole)
+    } else {
+        match parts::split(mesh) {
+            Some(split) => match retry_parts(mesh, &split, whole_out, whole, params, control) {
+                Ok(done) => done,
+                Err(back) => {
+                    let (whole_out, whole) = *back;
+                    restart(mesh, whole_out, whole, params, control)?
+                }
+            },
+            None => restart(mesh, whole_out, whole, params, control)?,
+        }
+    };
+    detour(out, report, params, control)
 }
 
 /// The parts stage of [`solve`]: each unconverged part run alone ([`retry_part`]), each part

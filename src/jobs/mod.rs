@@ -153,7 +153,11 @@ impl Kind {
                  max_iterations of its own), unfold=true|false (true: the folds, then the \
                  corners below min_angle, the run made are then repaired where that keeps \
                  every vertex flattenable, and a run of the paper's model that converged by \
-                 folding is run again from the penalised result; not with until=stationary)"
+                 folding is run again from the penalised result; not with until=stationary), \
+                 detour=true|false (true: a stalled run still unconverged after the retries goes \
+                 through develop's SQP, boundary held, and fl-mesh once more from there, and \
+                 is replaced when that lowers the max flattenability; not with \
+                 until=stationary)"
             }
             Kind::Subdivide => {
                 "levels (1; or --levels), curves (or --curves), split_ratio (0.5), \

@@ -696,6 +696,8 @@ fn restore(
         tolerance: tol,
         // The objective phase moves on from here; its own shape floor keeps the folds.
         unfold: false,
+        // The rounds alternate with the SQP already (`restore_rounds`).
+        detour: false,
         ..fl_mesh::Params::default()
     };
     let said = |first: &Run| {
