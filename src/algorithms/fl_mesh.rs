@@ -619,8 +619,10 @@ pub fn solve(
 /// (Gauss–Bonnet) and Eq. 7's steps no longer lower ‖2π − θ‖: the SQP's Levenberg–Marquardt
 /// steps on E move the mesh off that point. Measured on unseen MakeHuman and GarmentTransfer
 /// garments (issue 12 note of 2026-11-27): GarmentTransfer's shirt 1.2e-4 and t-shirt 8.0e-4
-/// converge through it in 10 and 31 fl-mesh iterations. A stop or failure of either stage
-/// keeps the result.
+/// converge through it in 10 and 31 fl-mesh iterations. Unconverged, the outcome is taken on
+/// ϖ_max alone (the issue's merit), though on the stalled MakeHuman suits it folds more
+/// (mh_male_worksuit01 2 → 17 folds for 0.145 → 2.3e-2): neither result is usable as it is,
+/// and the warnings point to `segment`. A stop or failure of either stage keeps the result.
 fn detour(
     out: Mesh,
     mut report: Report,
