@@ -677,21 +677,31 @@ fn detour(
             return Ok((out, report));
         }
     };
-    if second.converged || second.max_flattenability < report.max_flattenability {
-        // The second run's numbering extends the first's (refinement appends).
-        let refined = report.refined.clone();
-        let mut chained = chain(report, second, |f, s| {
-            format!("{f}; then develop's SQP from the best result (boundary held, g_max {g:.2e}) and fl-mesh from there: {s}")
-        });
-        chained.refined = [refined, chained.refined].concat();
-        return Ok((again, chained));
-    }
-    absorb(&mut report, &second);
-    report.stop_reason = format!(
-        "{}; then develop's SQP from the best result (g_max {g:.2e}) and fl-mesh from there, which did not lower ϖ_max ({:.2e}: {})",
-        report.stop_reason, second.max_flattenability, second.stop_reason
+    let what = format!(
+        "then develop's SQP from the best result (boundary held, g_max {g:.2e}) and fl-mesh \
+         from there"
     );
-    Ok((out, report))
+    Ok(keep_lower((out, report), (again, second), &what))
+}
+
+/// The later run (`second`, from `first`'s result, whose numbering it extends) when it
+/// converged or lowered ϖ_max, its report chained to the first's; else the first, with the
+/// later run's iterations absorbed. `what` names the later stage in the stop reason.
+fn keep_lower(first: (Mesh, Report), second: (Mesh, Report), what: &str) -> (Mesh, Report) {
+    let ((out, mut first), (again, second)) = (first, second);
+    if second.converged || second.max_flattenability < first.max_flattenability {
+        // Refinement appends, so the first run's refined ids stay valid.
+        let refined = first.refined.clone();
+        let mut report = chain(first, second, |f, s| format!("{f}; {what}: {s}"));
+        report.refined = [refined, report.refined].concat();
+        return (again, report);
+    }
+    absorb(&mut first, &second);
+    first.stop_reason = format!(
+        "{}; {what}, which did not lower ϖ_max ({:.2e}: {})",
+        first.stop_reason, second.max_flattenability, second.stop_reason
+    );
+    (out, first)
 }
 
 /// The result's folds and slivers (a corner below `min_angle`) that the input did not have
@@ -994,21 +1004,11 @@ fn restart(
                 return Ok((out, first));
             }
         };
-    if second.converged || second.max_flattenability < first.max_flattenability {
-        // The restart's numbering extends the first run's (refinement appends).
-        let refined = first.refined.clone();
-        let mut report = chain(first, second, |f, s| {
-            format!("{f}; restarted from the best iterate: {s}")
-        });
-        report.refined = [refined, report.refined].concat();
-        return Ok((again, report));
-    }
-    absorb(&mut first, &second);
-    first.stop_reason = format!(
-        "{}; restarted from the best iterate, which did not lower ϖ_max ({:.2e}: {})",
-        first.stop_reason, second.max_flattenability, second.stop_reason
-    );
-    Ok((out, first))
+    Ok(keep_lower(
+        (out, first),
+        (again, second),
+        "restarted from the best iterate",
+    ))
 }
 
 /// A part's own runs and the result it keeps.
