@@ -332,9 +332,9 @@ pub struct Params {
     /// is the paper's stationary point.
     pub unfold: bool,
     /// A run that stalled (not one cut short by `max_iterations`) and is still unconverged
-    /// after the retries is run through `develop`'s SQP (edge
-    /// lengths kept, boundary and seams held) and fl-mesh once more from there, and replaced
-    /// when that lowers ϖ_max (see [`solve`]). Not with `until = stationary`.
+    /// after the retries is run through `develop`'s SQP (edge lengths kept, boundary and
+    /// seams held) and fl-mesh once more from there, and replaced when that lowers ϖ_max
+    /// (see [`solve`]). Not with `until = stationary`.
     pub detour: bool,
 }
 
