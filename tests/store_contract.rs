@@ -168,7 +168,10 @@ fn postgres_status_polls_survive_a_lost_listener() {
     until("a repeated poll being a cache hit", &|| {
         hit() == Some(Some(Status::Failed))
     });
-    // Both replicas' listeners are cut, and a change is made while nobody listens.
+    // Both replicas' listeners are cut, and a change is made while nobody listens. b's
+    // listener connects on its own task; under load it may not be up yet (a CI run on
+    // 2026-11-27 cut only a's), so wait for it first.
+    until("b's listener being up", &|| b.status_cache().0);
     assert_eq!(cut(), 2, "two listeners were connected");
     until("the cache going off with its listener", &|| {
         !a.status_cache().0

@@ -79,7 +79,9 @@ pub use crate::geometry::SLIVER_DEGREES;
 /// The [`ShapeCheck`] of a job whose output mesh is not its input's geometry (None for the
 /// others). A flattenable output can still be crumpled: measured on unseen whole garments
 /// (several openings, one patch), fl-mesh converged with 41–308 new folds where sleeves and
-/// body meet, and said nothing.
+/// body meet, and said nothing. The advice it gives was measured on 14 such garments
+/// (issue 12 note of 2026-11-27): `segment` with then=fl-mesh made every one flattenable per
+/// panel at 1.1–3.5 % of the diagonal, against 6–10 % for whole-garment fl-mesh.
 pub fn check_shape(input: &Mesh, outcome: &JobOutcome) -> Option<ShapeCheck> {
     let out = outcome.mesh.as_ref()?;
     if out.positions() == input.positions() {
@@ -105,7 +107,8 @@ pub fn check_shape(input: &Mesh, outcome: &JobOutcome) -> Option<ShapeCheck> {
              120°), the input's {folds_before}; look at mesh.glb before using it. A patch that \
              cannot become flattenable smoothly with its boundary kept (e.g. a whole garment \
              whose sleeves or legs join its body) folds there: cut it into panels first \
-             (segment, or patches in the file)"
+             (the segment job with then=fl-mesh makes each panel flattenable, or patches in \
+             the file)"
         ));
     }
     if min_angle_after < SLIVER_DEGREES.min(min_angle_before) {
