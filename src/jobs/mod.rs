@@ -181,7 +181,8 @@ impl Kind {
                  (sqp: 1e-2), smoothness (sqp: 10, then 0 once flattenable and stationary), step_tolerance (sqp: 1e-4), stall_iterations (sqp: 40), restore=true|false (sqp: true; \
                  an unflattenable stall is followed by fl-mesh from the input, boundary fixed, \
                  and the SQP again from its result when that is flattenable or lower, with \
-                 max_iterations of its own; up to three rounds while each lowers g_max), \
+                 max_iterations of its own; up to three rounds, the second from the result so \
+                 far, the third only when the second lowered g_max), \
                  unfold=true|false (sqp: true; a flattenable result's new folds and corners \
                  below 1 degree are repaired along the constraints), eta \
                  (penalty_cg: 1e-4), cg_steps (penalty_cg: 5), rho_growth (penalty_cg: 1, the \
