@@ -658,13 +658,10 @@ fn detour(
     let Some((polished, g)) = polished else {
         return Ok((out, report));
     };
-    let inner = Params {
-        detour: false,
-        ..params.clone()
-    };
+    // One run: solve_clear_of has neither retries nor a detour of its own.
     let (again, second) = match solve_clear_of(
         &polished,
-        &inner,
+        params,
         None,
         &Renamed::after(control, "after the sqp detour"),
     ) {

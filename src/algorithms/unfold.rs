@@ -22,8 +22,8 @@
 //!   min(10°, the corner at the start); 1.5 times the minimum, with weight [`SLIVER_WEIGHT`],
 //!   for a corner below it), ½ Σ_e (l_e − l⁰_e)²/h̄² over its edges for a fold (bend, don't
 //!   stretch; a fold that bending did not open is tried once more without it; a sliver's
-//!   repair is a change of lengths, so not there), and ½ μ |x − x⁰|²/h̄², a small pull to the start that makes the
-//!   Gauss–Newton Hessian regular.
+//!   repair is a change of lengths, so not there), and ½ μ |x − x⁰|²/h̄², a small pull to
+//!   the start that makes the Gauss–Newton Hessian regular.
 //! - Step: sequential quadratic programming on the dense KKT system
 //!   `[H + σI, Aᵀ; A, −εI]` (A = ∂θ/∂x of the rows, FL paper Props. 1–2) with a
 //!   Levenberg–Marquardt trust region σ (÷3 after a taken step, ×4 after a refused one), and
