@@ -165,6 +165,23 @@
 //!   second attempt, sliver corners weighted 100): t-shirt 18 → 1 and 2 → 1, robert 20 → 1 and
 //!   4 → 4, casualsuit 214 → 73 and 24 → 12, sportsuit 18 → 0 and 12 → 0, gc_tee_sim 10 → 0,
 //!   classicshoes 10 → 2.
+//! - Remeshing (`remesh`, default on; [`remesh_defects`], the `remesh` module). What unfolding
+//!   leaves is mostly a bad choice of edges, not of positions: caps (a corner near 180°,
+//!   whose long edge wants flipping), needles (two vertices nearly coincident, whose short
+//!   edge wants collapsing) and overlapping hinges (whose edge wants the other diagonal). A
+//!   flattenable result's remaining new folds and slivers are mended so, θ = 2π is solved
+//!   again from there (the angle sums of the few vertices whose fans changed move) and
+//!   unfolded, in up to [`REMESH_ROUNDS`] rounds, each kept only when the output is
+//!   flattenable with fewer new folds plus slivers. A collapsed vertex stays in the output,
+//!   unreferenced, at the position of the vertex it was merged into, so input vertex i is
+//!   still output vertex i; texture coordinates are dropped once faces change, as with
+//!   refinement. Measured (issue 12 note of 2026-11-28, defaults; new folds and faces below
+//!   2° after unfolding → after remeshing): diffavatar_tshirt 1 and 1 → 0 and 0,
+//!   pf_robert_shirt_14 1 and 4 → 0 and 0, mh_female_casualsuit02 73 and 12 → 8 and 5 (but
+//!   its smallest corner 0.47° → 0.001°: a re-solve pressed a valence-3 vertex beside a
+//!   remaining fold onto its neighbours' edge), and on
+//!   unseen garments GarmentTransfer's t-shirt 0 and 3 → 0 and 0, its shirt likewise, its
+//!   trousers 50 and 2 → 17 and 1; each re-solve took 0.2–0.5 s on these 3k-vertex meshes.
 //! - Detour through develop's SQP (`detour`, default on; [`detour`]). Whole garments (a sphere
 //!   with 3–11 holes, sleeves and legs joined to the body) stall with nearly every interior
 //!   vertex at the same small excess θ > 2π (mh_female_elegantsuit01's top: 2219 of 2227
@@ -336,6 +353,12 @@ pub struct Params {
     /// seams held) and fl-mesh once more from there, and replaced when that lowers ϖ_max
     /// (see [`solve`]). Not with `until = stationary`.
     pub detour: bool,
+    /// The new folds and slivers a flattenable result still has after `unfold` are mended by
+    /// flipping edges and collapsing needles (the `remesh` module), then θ = 2π is solved
+    /// again from there; kept when that converges with fewer (see [`solve`]). A collapsed
+    /// vertex stays in the output unreferenced, so the numbering holds. Not with
+    /// `until = stationary`.
+    pub remesh: bool,
 }
 
 impl Default for Params {
@@ -362,6 +385,7 @@ impl Default for Params {
             retry: true,
             unfold: true,
             detour: true,
+            remesh: true,
         }
     }
 }
@@ -499,6 +523,27 @@ pub struct Report {
     /// repairing them did (the counts are the whole mesh's, the input's own included).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub unfold: Option<super::unfold::Summary>,
+    /// With `remesh`, when a flattenable result still had new folds or slivers after
+    /// unfolding: what mending its connectivity did.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub remesh: Option<RemeshReport>,
+}
+
+/// What [`remesh_defects`] did: its operations over all rounds and the new folds and
+/// slivers (those the input did not have) before and after.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct RemeshReport {
+    /// Rounds whose result was kept (mend, re-solve, unfold).
+    pub rounds: usize,
+    /// Edges flipped, edges collapsed, and each collapse as [removed, kept].
+    #[serde(flatten)]
+    pub operations: super::remesh::Summary,
+    /// New folds before the first round and after the last kept one.
+    pub new_folds: [usize; 2],
+    /// New faces with a corner below `min_angle`, likewise.
+    pub new_slivers: [usize; 2],
+    /// Why it stopped.
+    pub stop_reason: String,
 }
 
 /// The outcome of one independent part of a mesh (a connected part of one patch).
@@ -601,14 +646,18 @@ pub fn run(
 /// cut short by `max_iterations`) and the retries is handed to [`detour`].
 ///
 /// Unfolding (`unfold`, default on): the result's new folds and slivers are then repaired
-/// where that keeps every interior vertex within the tolerance ([`open_new_folds`]).
+/// where that keeps every interior vertex within the tolerance ([`open_new_folds`]), and
+/// remeshing (`remesh`, default on) mends what is left of them on a flattenable result by
+/// flips and collapses and a re-solve ([`remesh_defects`]); a collapsed vertex stays,
+/// unreferenced, so input vertex i is still output vertex i.
 pub fn solve(
     mesh: &Mesh,
     params: &Params,
     control: &dyn Control,
 ) -> Result<(Mesh, Report), AlgoError> {
     let (out, report) = solve_retried(mesh, params, control)?;
-    open_new_folds(mesh, out, report, params, control)
+    let (out, report) = open_new_folds(mesh, out, report, params, control)?;
+    remesh_defects(mesh, out, report, params, control)
 }
 
 /// An unconverged result run through `develop`'s SQP (least change of its edge lengths along
@@ -701,6 +750,198 @@ fn keep_lower(first: (Mesh, Report), second: (Mesh, Report), what: &str) -> (Mes
     (out, first)
 }
 
+/// A result's folds (edges) and slivers (faces with a corner below the minimum) that its
+/// input did not have, by vertex pair and triple: refinement's or remeshing's new edges and
+/// faces count as new.
+struct Defects {
+    folds: Vec<u32>,
+    slivers: Vec<u32>,
+}
+
+impl Defects {
+    /// (folds, slivers).
+    fn counts(&self) -> (usize, usize) {
+        (self.folds.len(), self.slivers.len())
+    }
+}
+
+/// How [`remesh_defects`] compares rounds: new folds and slivers together, then folds.
+fn merit(d: &Defects) -> (usize, usize) {
+    (d.folds.len() + d.slivers.len(), d.folds.len())
+}
+
+fn new_defects(input: &Mesh, out: &Mesh, min_corner: f64) -> Defects {
+    let old: std::collections::HashSet<[u32; 2]> = crate::geometry::fold_edges(input)
+        .into_iter()
+        .map(|e| input.conn().edges()[e as usize])
+        .collect();
+    let folds: Vec<u32> = crate::geometry::fold_edges(out)
+        .into_iter()
+        .filter(|&e| !old.contains(&out.conn().edges()[e as usize]))
+        .collect();
+    let sliver_faces = |m: &Mesh| {
+        let small = crate::geometry::min_corner_angles(m);
+        (0..m.num_faces()).filter(move |&f| small[f] < min_corner)
+    };
+    let key = |t: [u32; 3]| {
+        let mut t = t;
+        t.sort_unstable();
+        t
+    };
+    let old_slivers: std::collections::HashSet<[u32; 3]> = sliver_faces(input)
+        .map(|f| key(input.triangles()[f]))
+        .collect();
+    let slivers: Vec<u32> = sliver_faces(out)
+        .filter(|&f| !old_slivers.contains(&key(out.triangles()[f])))
+        .map(|f| f as u32)
+        .collect();
+    Defects { folds, slivers }
+}
+
+/// Rounds of [`remesh_defects`]. Measured (issue 12 note of 2026-11-28): one round mended
+/// every garment tried but pf_robert_shirt_14, whose re-solve left a fold for the next.
+const REMESH_ROUNDS: usize = 3;
+
+/// A flattenable result's new folds and slivers that unfolding left, mended by connectivity
+/// ([`super::remesh::mend`]: flip a fold's edge or a cap's long edge, collapse a needle's
+/// short edge), then θ = 2π solved again from the mended mesh (one run: no cone, retries or
+/// detour, since the surface is flattenable but for the few vertices whose fans changed) and
+/// unfolded; a round is kept only when its result is flattenable with fewer new folds, or as
+/// many and fewer new slivers, than before. Vertices a collapse removed stay unreferenced, at
+/// the final position of the vertex they were merged into. A failure or stop of a round
+/// keeps the result before it.
+fn remesh_defects(
+    input: &Mesh,
+    mut out: Mesh,
+    mut report: Report,
+    params: &Params,
+    control: &dyn Control,
+) -> Result<(Mesh, Report), AlgoError> {
+    if !params.remesh || params.until == Until::Stationary || !report.converged {
+        return Ok((out, report));
+    }
+    let min_corner = params.min_angle.to_radians();
+    let mut defects = new_defects(input, &out, min_corner);
+    let (folds, slivers) = defects.counts();
+    if folds + slivers == 0 {
+        return Ok((out, report));
+    }
+    let mut done = RemeshReport {
+        new_folds: [folds; 2],
+        new_slivers: [slivers; 2],
+        stop_reason: "no new fold or sliver left".into(),
+        ..RemeshReport::default()
+    };
+    let polish = Params {
+        cone_start: ConeStart::Never,
+        retry: false,
+        detour: false,
+        remesh: false,
+        ..params.clone()
+    };
+    for round in 1..=REMESH_ROUNDS {
+        if defects.counts() == (0, 0) {
+            break;
+        }
+        let edges = out.conn().edges();
+        let folds: Vec<[u32; 2]> = defects.folds.iter().map(|&e| edges[e as usize]).collect();
+        let slivers: Vec<[u32; 3]> = defects
+            .slivers
+            .iter()
+            .map(|&f| out.triangles()[f as usize])
+            .collect();
+        let impossible = impossible_vertices(&out);
+        let movable: Vec<bool> = (0..out.num_vertices())
+            .map(|v| out.conn().is_interior(v as u32) && !impossible[v])
+            .collect();
+        let task = super::remesh::Task {
+            folds: &folds,
+            slivers: &slivers,
+            movable: &movable,
+            min_corner,
+            slivers_first: false,
+        };
+        // Slivers whose every mending folds an edge before the re-solve are tried again
+        // with slivers first: the re-solve may open the fold, and the round is judged after.
+        let mended = super::remesh::mend(&out, &task).or_else(|| {
+            let lenient = super::remesh::Task {
+                slivers_first: true,
+                ..task
+            };
+            super::remesh::mend(&out, &lenient)
+        });
+        let Some(mended) = mended else {
+            done.stop_reason = format!("round {round}: no flip or collapse improved its faces");
+            break;
+        };
+        let ctl = Renamed::after(control, "remesh");
+        let solved = solve_clear_of(&mended.mesh, &polish, None, &ctl)
+            .and_then(|(m, r)| open_new_folds(input, m, r, params, &ctl));
+        let (again, second) = match solved {
+            Ok(d) => d,
+            Err(e) => {
+                done.stop_reason = format!("round {round}: the re-solve failed: {e}");
+                break;
+            }
+        };
+        absorb(&mut report, &second);
+        let after = new_defects(input, &again, min_corner);
+        if !second.converged || merit(&after) >= merit(&defects) {
+            done.stop_reason = format!(
+                "round {round}: re-solved to ϖ_max {:.2e} with {} new folds and {} slivers, \
+                 not kept",
+                second.max_flattenability,
+                after.folds.len(),
+                after.slivers.len()
+            );
+            break;
+        }
+        report.max_flattenability = second.max_flattenability;
+        report.stuck_vertices = second.stuck_vertices;
+        report.stationarity = second.stationarity;
+        report.free_vertices = second.free_vertices;
+        report.refined.extend(second.refined);
+        done.rounds = round;
+        done.operations.flips += mended.summary.flips;
+        done.operations.collapses += mended.summary.collapses;
+        done.operations.merged.extend(mended.summary.merged);
+        (done.new_folds[1], done.new_slivers[1]) = after.counts();
+        out = again;
+        defects = after;
+    }
+    if done.rounds > 0 {
+        out = place_merged(out, &done.operations.merged);
+        report.stop_reason = format!(
+            "{}; remeshed in {} round(s): {} flips, {} collapses",
+            report.stop_reason, done.rounds, done.operations.flips, done.operations.collapses
+        );
+    }
+    report.remesh = Some(done);
+    Ok((out, report))
+}
+
+/// Each vertex a collapse removed put at the final position of the vertex it ended up merged
+/// into (following later collapses of that one), so that it lies on the surface.
+fn place_merged(out: Mesh, merged: &[[u32; 2]]) -> Mesh {
+    let into: std::collections::HashMap<u32, u32> = merged
+        .iter()
+        .map(|&[removed, kept]| (removed, kept))
+        .collect();
+    let mut positions = out.positions().to_vec();
+    for &[removed, _] in merged {
+        let mut root = removed;
+        // Chains are at most as long as the collapses.
+        for _ in 0..=merged.len() {
+            match into.get(&root) {
+                Some(&next) => root = next,
+                None => break,
+            }
+        }
+        positions[removed as usize] = positions[root as usize];
+    }
+    out.with_positions(positions).unwrap_or(out)
+}
+
 /// The result's folds and slivers (a corner below `min_angle`) that the input did not have
 /// (by vertex pair and triple: refinement's new edges and faces count as new), repaired by
 /// [`super::unfold::unfold`], moving only the free vertices.
@@ -714,32 +955,8 @@ fn open_new_folds(
     if !params.unfold || params.until == Until::Stationary {
         return Ok((out, report));
     }
-    let old: std::collections::HashSet<[u32; 2]> = crate::geometry::fold_edges(input)
-        .into_iter()
-        .map(|e| input.conn().edges()[e as usize])
-        .collect();
-    let folds: Vec<u32> = crate::geometry::fold_edges(&out)
-        .into_iter()
-        .filter(|&e| !old.contains(&out.conn().edges()[e as usize]))
-        .collect();
-    // Faces with a corner below `min_angle` that the input did not have (by vertex triple).
     let min_corner = params.min_angle.to_radians();
-    let sliver_faces = |m: &Mesh| {
-        let small = crate::geometry::min_corner_angles(m);
-        (0..m.num_faces()).filter(move |&f| small[f] < min_corner)
-    };
-    let key = |t: [u32; 3]| {
-        let mut t = t;
-        t.sort_unstable();
-        t
-    };
-    let old_slivers: std::collections::HashSet<[u32; 3]> = sliver_faces(input)
-        .map(|f| key(input.triangles()[f]))
-        .collect();
-    let slivers: Vec<u32> = sliver_faces(&out)
-        .filter(|&f| !old_slivers.contains(&key(out.triangles()[f])))
-        .map(|f| f as u32)
-        .collect();
+    let Defects { folds, slivers } = new_defects(input, &out, min_corner);
     if folds.is_empty() && slivers.is_empty() {
         return Ok((out, report));
     }

@@ -8,6 +8,7 @@ pub mod develop;
 pub mod fl_mesh;
 pub mod flatten;
 pub mod perturb;
+pub mod remesh;
 pub mod report_job;
 pub mod segment;
 pub mod subdivide;

@@ -332,8 +332,10 @@ pub fn run(
         let (out, fl) = if params.flatten_levels {
             // A level models the finer surface of its control mesh: the developable cone
             // would replace it by another shape, so never, whatever `fl_mesh` says.
+            // Nor are its faces changed: the next level subdivides this level's connectivity.
             let fl = fl_mesh::Params {
                 cone_start: fl_mesh::ConeStart::Never,
+                remesh: false,
                 ..params.fl_mesh.clone()
             };
             let (m, r) = fl_mesh::solve(&split, &fl, &ctl)?;

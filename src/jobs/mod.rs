@@ -157,6 +157,10 @@ impl Kind {
                  detour=true|false (true: a stalled run still unconverged after the retries goes \
                  through develop's SQP, boundary held, and fl-mesh once more from there, and \
                  is replaced when that lowers the max flattenability; not with \
+                 until=stationary), remesh=true|false (true: the new folds and corners below \
+                 min_angle that a flattenable result still has after unfold are mended by \
+                 edge flips and collapses and solved again, kept when that leaves fewer; a \
+                 collapsed vertex stays in the output unreferenced; not with \
                  until=stationary)"
             }
             Kind::Subdivide => {

@@ -698,6 +698,8 @@ fn restore(
         unfold: false,
         // The rounds alternate with the SQP already (`restore_rounds`).
         detour: false,
+        // The SQP goes on with the input's faces.
+        remesh: false,
         ..fl_mesh::Params::default()
     };
     let said = |first: &Run| {
