@@ -850,10 +850,7 @@ fn remesh_defects(
             .iter()
             .map(|&f| out.triangles()[f as usize])
             .collect();
-        let impossible = impossible_vertices(&out);
-        let movable: Vec<bool> = (0..out.num_vertices())
-            .map(|v| out.conn().is_interior(v as u32) && !impossible[v])
-            .collect();
+        let movable = free_vertices(&out);
         let task = super::remesh::Task {
             folds: &folds,
             slivers: &slivers,
@@ -920,6 +917,14 @@ fn remesh_defects(
     Ok((out, report))
 }
 
+/// Interior vertices not held by a proven obstruction: what unfolding and remeshing may move.
+fn free_vertices(out: &Mesh) -> Vec<bool> {
+    let impossible = impossible_vertices(out);
+    (0..out.num_vertices())
+        .map(|v| out.conn().is_interior(v as u32) && !impossible[v])
+        .collect()
+}
+
 /// Each vertex a collapse removed put at the final position of the vertex it ended up merged
 /// into (following later collapses of that one), so that it lies on the surface.
 fn place_merged(out: Mesh, merged: &[[u32; 2]]) -> Mesh {
@@ -960,10 +965,7 @@ fn open_new_folds(
     if folds.is_empty() && slivers.is_empty() {
         return Ok((out, report));
     }
-    let impossible = impossible_vertices(&out);
-    let free: Vec<bool> = (0..out.num_vertices())
-        .map(|v| out.conn().is_interior(v as u32) && !impossible[v])
-        .collect();
+    let free = free_vertices(&out);
     let task = super::unfold::Task {
         folds: &folds,
         slivers: &slivers,
