@@ -33,6 +33,10 @@ use crate::geometry::{corner_angle, normalize, FOLD_ANGLE};
 use crate::mesh::{cross, dot, is_degenerate_triangle, sub, Mesh, RawMesh, VertexKind};
 use serde::Serialize;
 
+/// Most faces around any vertex an operation touches (a regular mesh has 6): a sliver at a hub
+/// of thousands of faces is left alone rather than scored in time quadratic in its fan.
+const MAX_FAN: usize = 32;
+
 /// What to mend.
 #[derive(Debug, Clone, Copy)]
 pub struct Task<'a> {
@@ -258,6 +262,11 @@ impl<'a> Soup<'a> {
         }
     }
 
+    /// More than [`MAX_FAN`] faces around `v`.
+    fn hub(&self, v: u32) -> bool {
+        self.vf[v as usize].len() > MAX_FAN
+    }
+
     /// Faces a vertex must keep: three around an interior one, one at a boundary or seam.
     fn can_lose_a_face(&self, v: u32) -> bool {
         let need = if self.interior[v as usize] { 4 } else { 2 };
@@ -267,6 +276,9 @@ impl<'a> Soup<'a> {
     /// Flip edge (a, b) if both its faces are in one patch and the flip improves their score
     /// (folds on every edge of the two faces, then slivers, or slivers first).
     fn flip(&mut self, a: u32, b: u32, slivers_first: bool) -> bool {
+        if self.hub(a) || self.hub(b) {
+            return false;
+        }
         let fs = self.faces_of_edge(a, b);
         let [f1, f2] = fs[..] else { return false };
         if self.patch[f1 as usize] != self.patch[f2 as usize] {
@@ -291,6 +303,8 @@ impl<'a> Soup<'a> {
         }
         let (c, d) = (r1[2], r2[2]);
         if c == d
+            || self.hub(c)
+            || self.hub(d)
             || !self.faces_of_edge(c, d).is_empty()
             || !self.can_lose_a_face(a)
             || !self.can_lose_a_face(b)
@@ -324,6 +338,9 @@ impl<'a> Soup<'a> {
         if !self.task.movable[w as usize] || !self.interior[w as usize] {
             return false;
         }
+        if self.hub(u) || self.hub(w) {
+            return false;
+        }
         let fs = self.faces_of_edge(u, w);
         let [g1, g2] = fs[..] else { return false };
         let other = |f: u32| {
@@ -333,6 +350,9 @@ impl<'a> Soup<'a> {
                 .unwrap_or(u)
         };
         let (c, d) = (other(g1), other(g2));
+        if self.hub(c) || self.hub(d) {
+            return false;
+        }
         let mut common: Vec<u32> = self.neighbours(u);
         let nw = self.neighbours(w);
         common.retain(|x| nw.contains(x));
@@ -407,7 +427,8 @@ impl<'a> Soup<'a> {
     /// One operation on a sliver still present as it was: a cap (a corner of 120° or more)
     /// flips its long edge first, a needle collapses its short edge first; then the other.
     fn sliver(&mut self, t: [u32; 3]) -> Option<Op> {
-        let f = *self.vf[t[0] as usize].iter().find(|&&f| {
+        let least = *t.iter().min_by_key(|&&v| self.vf[v as usize].len())?;
+        let f = *self.vf[least as usize].iter().find(|&&f| {
             let s = self.tris[f as usize];
             t.iter().all(|v| s.contains(v))
         })?;
@@ -555,6 +576,29 @@ mod tests {
         let task = Task {
             folds: &[[6, 0]],
             slivers: &[triangles[0]],
+            movable: &movable,
+            min_corner: 2f64.to_radians(),
+            slivers_first: false,
+        };
+        assert!(mend(&m, &task).is_none());
+    }
+
+    /// A disk of 20000 thin faces around one hub, every one a sliver: the hub's fan is too
+    /// large to score, so nothing is done (rather than work quadratic in the fan).
+    #[test]
+    fn a_hub_is_left_alone() {
+        let k = 20_000u32;
+        let mut positions = vec![[0.0, 0.0, 0.0]];
+        positions.extend((0..k).map(|i| {
+            let a = f64::from(i) * std::f64::consts::TAU / f64::from(k);
+            [a.cos(), a.sin(), 0.0]
+        }));
+        let triangles: Vec<[u32; 3]> = (0..k).map(|i| [0, 1 + i, 1 + (i + 1) % k]).collect();
+        let m = mesh(positions, triangles.clone());
+        let movable = vec![false; m.num_vertices()];
+        let task = Task {
+            folds: &[],
+            slivers: &triangles,
             movable: &movable,
             min_corner: 2f64.to_radians(),
             slivers_first: false,
