@@ -175,7 +175,7 @@
 //!   flattenable with fewer new folds plus slivers. A collapsed vertex stays in the output,
 //!   unreferenced, at the position of the vertex it was merged into, so input vertex i is
 //!   still output vertex i; texture coordinates are dropped once faces change, as with
-//!   refinement. Measured (issue 12 note of 2026-11-28, defaults; new folds and faces below
+//!   refinement. Measured (issue 12 note of 2026-11-27, defaults; new folds and faces below
 //!   2° after unfolding → after remeshing): diffavatar_tshirt 1 and 1 → 0 and 0,
 //!   pf_robert_shirt_14 1 and 4 → 0 and 0, mh_female_casualsuit02 73 and 12 → 8 and 5 (but
 //!   its smallest corner 0.47° → 0.001°: a re-solve pressed a valence-3 vertex beside a
@@ -798,16 +798,17 @@ fn new_defects(input: &Mesh, out: &Mesh, min_corner: f64) -> Defects {
     Defects { folds, slivers }
 }
 
-/// Rounds of [`remesh_defects`]. Measured (issue 12 note of 2026-11-28): one round mended
-/// every garment tried but pf_robert_shirt_14, whose re-solve left a fold for the next.
+/// Rounds of [`remesh_defects`]. Measured (issue 12 note of 2026-11-27, 9 garments): one
+/// round was kept on six, two on GarmentTransfer's shirt and on MakeHuman's two female
+/// casual suits, a third never.
 const REMESH_ROUNDS: usize = 3;
 
 /// A flattenable result's new folds and slivers that unfolding left, mended by connectivity
 /// ([`super::remesh::mend`]: flip a fold's edge or a cap's long edge, collapse a needle's
 /// short edge), then θ = 2π solved again from the mended mesh (one run: no cone, retries or
 /// detour, since the surface is flattenable but for the few vertices whose fans changed) and
-/// unfolded; a round is kept only when its result is flattenable with fewer new folds, or as
-/// many and fewer new slivers, than before. Vertices a collapse removed stay unreferenced, at
+/// unfolded; a round is kept only when its result is flattenable with fewer new folds plus
+/// slivers than before (as many: fewer folds). Vertices a collapse removed stay unreferenced, at
 /// the final position of the vertex they were merged into. A failure or stop of a round
 /// keeps the result before it.
 fn remesh_defects(
