@@ -18,6 +18,13 @@ fn shared_root() -> Option<PathBuf> {
 
 /// Run and check what must hold for every input; returns (ϖ in, ϖ out, converged).
 fn check_never_worse(name: &str, mesh: &Mesh, params: &Params) -> (f64, f64, bool) {
+    let (out, report) = checked_run(name, mesh, params);
+    let m = corpus::measure(mesh, &out);
+    (m.varpi_in, m.varpi_out, report.converged)
+}
+
+/// [`check_never_worse`]'s run and checks, returning the output and the report.
+fn checked_run(name: &str, mesh: &Mesh, params: &Params) -> (Mesh, fl_mesh::Report) {
     let (out, report) = fl_mesh::solve(mesh, params, &Silent::default()).expect("runs");
     let m = corpus::measure(mesh, &out);
     assert!(m.varpi_out.is_finite(), "{name}: non-finite ϖ");
@@ -61,15 +68,19 @@ fn check_never_worse(name: &str, mesh: &Mesh, params: &Params) -> (f64, f64, boo
     // change it afterwards).
     let remeshed = report.remesh.as_ref().is_some_and(|r| r.rounds > 0);
     if let Some(r) = &report.remesh {
+        // A round is kept on a lower ϖ_max when the result before it was unconverged, else on
+        // fewer new folds plus slivers; what it says it reached is what the output has.
         assert!(
-            report.converged,
-            "{name}: remeshed an unconverged result: {r:?}"
-        );
-        // Rounds are kept on fewer new folds plus slivers.
-        assert!(
-            r.new_folds[1] + r.new_slivers[1] <= r.new_folds[0] + r.new_slivers[0],
+            r.max_flattenability[1] <= r.max_flattenability[0],
             "{name}: {r:?}"
         );
+        assert_eq!(r.max_flattenability[1], m.varpi_out, "{name}: {r:?}");
+        if r.max_flattenability[0] <= params.tolerance {
+            assert!(
+                r.new_folds[1] + r.new_slivers[1] <= r.new_folds[0] + r.new_slivers[0],
+                "{name}: {r:?}"
+            );
+        }
         // What it says it left is what the output has, counted here from the geometry.
         let (folds_in, slivers_in) = folds_and_slivers(mesh, params.min_angle);
         let (folds, slivers) = folds_and_slivers(&out, params.min_angle);
@@ -119,7 +130,7 @@ fn check_never_worse(name: &str, mesh: &Mesh, params: &Params) -> (f64, f64, boo
         100.0 * m.hausdorff_relative,
         report.converged
     );
-    (m.varpi_in, m.varpi_out, report.converged)
+    (out, report)
 }
 
 /// A budget that keeps the suite short; the property holds for any budget. Without the
@@ -142,13 +153,18 @@ fn the_sqp_detour_lowers_a_stalled_whole_suit() {
     let Some(root) = shared_root() else { return };
     let path = root.join("garment/mh_male_worksuit01.obj");
     let (mesh, _) = flatmesh::io::load_path(&path).expect("loads");
+    // Remeshing, which follows the detour, is off in both runs: this measures the detour.
+    let on = Params {
+        remesh: false,
+        ..Params::default()
+    };
     let off = Params {
         detour: false,
-        ..Params::default()
+        ..on.clone()
     };
     let (_, w_off, conv_off) = check_never_worse("worksuit without the detour", &mesh, &off);
     assert!(!conv_off, "converged without the detour: pick another mesh");
-    let (_, w_on, _) = check_never_worse("worksuit", &mesh, &Params::default());
+    let (_, w_on, _) = check_never_worse("worksuit", &mesh, &on);
     assert!(
         w_on < 0.5 * w_off,
         "ϖ_max {w_off:e} without the detour, {w_on:e} with it"
@@ -417,6 +433,51 @@ fn remeshing_mends_the_folds_and_slivers_unfolding_left() {
             );
         }
     }
+}
+
+/// mh_female_elegantsuit01's top (a sphere with three openings) stalls with slivers and
+/// folds the input did not have (measured 2026-11-27: ϖ_max 4.4e-3, 28 folded edges, smallest
+/// corner 0.01°); remeshing that stalled result and solving again lowers ϖ_max (measured
+/// 2.9e-3, 9 folds, 2.39°). Checked against an independent run without remeshing, from the
+/// geometry: ϖ_max lower, fewer new folds plus slivers.
+#[test]
+fn remeshing_a_stalled_whole_garment_lowers_its_flattenability() {
+    let Some(root) = shared_root() else { return };
+    let (mesh, _) =
+        flatmesh::io::load_path(&root.join("garment/mh_female_elegantsuit01.obj")).expect("loads");
+    let off = Params {
+        remesh: false,
+        ..Params::default()
+    };
+    let (before, _) = fl_mesh::solve(&mesh, &off, &Silent::default()).expect("runs");
+    let b = corpus::measure(&mesh, &before);
+    assert!(
+        b.varpi_out > 1e-6,
+        "converged without remeshing: pick another mesh"
+    );
+    let (out, report) = checked_run("elegantsuit", &mesh, &Params::default());
+    let m = corpus::measure(&mesh, &out);
+    assert!(
+        m.varpi_out < 0.9 * b.varpi_out,
+        "ϖ_max {:e} without remeshing, {:e} with it",
+        b.varpi_out,
+        m.varpi_out
+    );
+    let r = report
+        .remesh
+        .expect("the stalled result had slivers to mend");
+    assert!(r.rounds >= 1, "{r:?}");
+    let (folds_in, slivers_in) = folds_and_slivers(&mesh, 2.0);
+    let count = |m: &Mesh| {
+        let (f, s) = folds_and_slivers(m, 2.0);
+        f.difference(&folds_in).count() + s.difference(&slivers_in).count()
+    };
+    assert!(
+        count(&out) < count(&before),
+        "new folds plus slivers: {} without remeshing, {} with it",
+        count(&before),
+        count(&out)
+    );
 }
 
 /// pf_robert_shirt_14's penalised run stalls and the paper's model from the input converges

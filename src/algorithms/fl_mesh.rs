@@ -182,6 +182,17 @@
 //!   remaining fold onto its neighbours' edge), and on
 //!   unseen garments GarmentTransfer's t-shirt 0 and 3 → 0 and 0, its shirt likewise, its
 //!   trousers 50 and 2 → 17 and 1; each re-solve took 0.2–0.5 s on these 3k-vertex meshes.
+//!   An unconverged result is remeshed too, each round kept when it lowers ϖ_max: the stalled
+//!   whole garments carry new caps, needles and near-folded fans, where θ's linearisation
+//!   fails (on mh_female_elegantsuit01's stalled result a min-norm step scaled to 0.01 h̄
+//!   moved θ by 0.5 rad at caps beside the openings). Measured (issue 12 note of
+//!   2026-11-27, session 26; defaults, against the code before): mh_female_elegantsuit01
+//!   4.4e-3 → 2.9e-3 (folds 28 → 9, smallest corner 0.01° → 2.39°), mh_male_elegantsuit01
+//!   0.31 → 0.21 (folds 131 → 46); unseen MakeHuman suits: male casualsuit02 1.6e-2 →
+//!   flattenable (47 folds → 2, smallest corner 2.19°), casualsuit01 1.4e-2 → 5.3e-3,
+//!   casualsuit03 3.4e-3 → 2.6e-3; no round kept on mh_male_worksuit01,
+//!   diffavatar_shirt_artist and male casualsuit05, which pay for the refused re-solve
+//!   (shirt_artist 203 → 269 s, casualsuit01 114 → 251 s with its three kept rounds).
 //! - Detour through develop's SQP (`detour`, default on; [`detour`]). Whole garments (a sphere
 //!   with 3–11 holes, sleeves and legs joined to the body) stall with nearly every interior
 //!   vertex at the same small excess θ > 2π (mh_female_elegantsuit01's top: 2219 of 2227
@@ -353,9 +364,10 @@ pub struct Params {
     /// seams held) and fl-mesh once more from there, and replaced when that lowers ϖ_max
     /// (see [`solve`]). Not with `until = stationary`.
     pub detour: bool,
-    /// The new folds and slivers a flattenable result still has after `unfold` are mended by
-    /// flipping edges and collapsing needles (the `remesh` module), then θ = 2π is solved
-    /// again from there; kept when that converges with fewer (see [`solve`]). A collapsed
+    /// The new folds and slivers a result still has after `unfold` are mended by flipping
+    /// edges and collapsing needles (the `remesh` module), then θ = 2π is solved again from
+    /// there; kept when that converges with fewer, or, on an unconverged result, when it
+    /// lowers ϖ_max (see [`remesh_defects`]). A collapsed
     /// vertex stays in the output unreferenced, so the numbering holds. Not with
     /// `until = stationary`.
     pub remesh: bool,
@@ -523,8 +535,8 @@ pub struct Report {
     /// repairing them did (the counts are the whole mesh's, the input's own included).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub unfold: Option<super::unfold::Summary>,
-    /// With `remesh`, when a flattenable result still had new folds or slivers after
-    /// unfolding: what mending its connectivity did.
+    /// With `remesh`, when a result still had new folds or slivers after unfolding: what
+    /// mending its connectivity did.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub remesh: Option<RemeshReport>,
 }
@@ -542,6 +554,8 @@ pub struct RemeshReport {
     pub new_folds: [usize; 2],
     /// New faces with a corner below `min_angle`, likewise.
     pub new_slivers: [usize; 2],
+    /// ϖ_max before the first round and after the last kept one.
+    pub max_flattenability: [f64; 2],
     /// Why it stopped.
     pub stop_reason: String,
 }
@@ -647,8 +661,8 @@ pub fn run(
 ///
 /// Unfolding (`unfold`, default on): the result's new folds and slivers are then repaired
 /// where that keeps every interior vertex within the tolerance ([`open_new_folds`]), and
-/// remeshing (`remesh`, default on) mends what is left of them on a flattenable result by
-/// flips and collapses and a re-solve ([`remesh_defects`]); a collapsed vertex stays,
+/// remeshing (`remesh`, default on) mends what is left of them by flips and collapses and a
+/// re-solve ([`remesh_defects`]); a collapsed vertex stays,
 /// unreferenced, so input vertex i is still output vertex i.
 pub fn solve(
     mesh: &Mesh,
@@ -803,14 +817,17 @@ fn new_defects(input: &Mesh, out: &Mesh, min_corner: f64) -> Defects {
 /// casual suits, a third never.
 const REMESH_ROUNDS: usize = 3;
 
-/// A flattenable result's new folds and slivers that unfolding left, mended by connectivity
+/// A result's new folds and slivers that unfolding left, mended by connectivity
 /// ([`super::remesh::mend`]: flip a fold's edge or a cap's long edge, collapse a needle's
 /// short edge), then θ = 2π solved again from the mended mesh (one run: no cone, retries or
-/// detour, since the surface is flattenable but for the few vertices whose fans changed) and
-/// unfolded; a round is kept only when its result is flattenable with fewer new folds plus
-/// slivers than before (as many: fewer folds). Vertices a collapse removed stay unreferenced, at
-/// the final position of the vertex they were merged into. A failure or stop of a round
-/// keeps the result before it.
+/// detour) and unfolded. On a flattenable result a round is kept only when its result is
+/// flattenable with fewer new folds plus slivers than before (as many: fewer folds). On an
+/// unconverged one (whose stall the slivers and folds feed: on the stalled suits the
+/// linearised θ is worst at caps and near-folded fans, where 0.01 h̄ of the step moves θ by
+/// 0.5 rad) a round is kept when it lowers ϖ_max, as the retries and the detour are; once a
+/// round made it flattenable, up to [`REMESH_ROUNDS`] more follow under the first rule.
+/// Vertices a collapse removed stay unreferenced, at the final position of the vertex they
+/// were merged into. A failure or stop of a round keeps the result before it.
 fn remesh_defects(
     input: &Mesh,
     mut out: Mesh,
@@ -818,7 +835,13 @@ fn remesh_defects(
     params: &Params,
     control: &dyn Control,
 ) -> Result<(Mesh, Report), AlgoError> {
-    if !params.remesh || params.until == Until::Stationary || !report.converged {
+    if !params.remesh || params.until == Until::Stationary {
+        return Ok((out, report));
+    }
+    // An unconverged result held by a proven obstruction (a closed component) has nothing
+    // a re-solve could lower.
+    if !report.converged && (report.free_vertices == 0 || impossible_vertices(&out).contains(&true))
+    {
         return Ok((out, report));
     }
     let min_corner = params.min_angle.to_radians();
@@ -830,6 +853,7 @@ fn remesh_defects(
     let mut done = RemeshReport {
         new_folds: [folds; 2],
         new_slivers: [slivers; 2],
+        max_flattenability: [report.max_flattenability; 2],
         stop_reason: "no new fold or sliver left".into(),
         ..RemeshReport::default()
     };
@@ -840,10 +864,14 @@ fn remesh_defects(
         remesh: false,
         ..params.clone()
     };
-    for round in 1..=REMESH_ROUNDS {
-        if defects.counts() == (0, 0) {
+    // Rounds since the result became flattenable (or since the start): an unconverged
+    // result gets REMESH_ROUNDS towards convergence, then as many for its folds.
+    let mut in_mode = 0;
+    for round in 1..=2 * REMESH_ROUNDS {
+        if defects.counts() == (0, 0) || in_mode == REMESH_ROUNDS {
             break;
         }
+        in_mode += 1;
         let edges = out.conn().edges();
         let folds: Vec<[u32; 2]> = defects.folds.iter().map(|&e| edges[e as usize]).collect();
         let slivers: Vec<[u32; 3]> = defects
@@ -884,7 +912,13 @@ fn remesh_defects(
         };
         absorb(&mut report, &second);
         let after = new_defects(input, &again, min_corner);
-        if !second.converged || merit(&after) >= merit(&defects) {
+        let kept = if report.converged {
+            second.converged && merit(&after) < merit(&defects)
+        } else {
+            // Unconverged: ϖ_max first (the issue's merit), as the retries and the detour.
+            second.converged || second.max_flattenability < report.max_flattenability
+        };
+        if !kept {
             done.stop_reason = format!(
                 "round {round}: re-solved to ϖ_max {:.2e} with {} new folds and {} slivers, \
                  not kept",
@@ -894,7 +928,16 @@ fn remesh_defects(
             );
             break;
         }
+        if second.converged && !report.converged {
+            in_mode = 0;
+            report.converged = true;
+            report.stop_reason = format!(
+                "{}; flattenable after remeshing (round {round})",
+                report.stop_reason
+            );
+        }
         report.max_flattenability = second.max_flattenability;
+        done.max_flattenability[1] = second.max_flattenability;
         report.stuck_vertices = second.stuck_vertices;
         report.stationarity = second.stationarity;
         report.free_vertices = second.free_vertices;

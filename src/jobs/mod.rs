@@ -158,10 +158,10 @@ impl Kind {
                  through develop's SQP, boundary held, and fl-mesh once more from there, and \
                  is replaced when that lowers the max flattenability; not with \
                  until=stationary), remesh=true|false (true: the new folds and corners below \
-                 min_angle that a flattenable result still has after unfold are mended by \
-                 edge flips and collapses and solved again, kept when that leaves fewer; a \
-                 collapsed vertex stays in the output unreferenced; not with \
-                 until=stationary)"
+                 min_angle that a result still has after unfold are mended by edge flips and \
+                 collapses and solved again, kept when that leaves fewer, or, on an \
+                 unconverged result, when that lowers the max flattenability; a collapsed \
+                 vertex stays in the output unreferenced; not with until=stationary)"
             }
             Kind::Subdivide => {
                 "levels (1; or --levels), curves (or --curves), split_ratio (0.5), \
