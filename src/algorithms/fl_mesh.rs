@@ -867,8 +867,13 @@ fn remesh_defects(
     // Rounds since the result became flattenable (or since the start): an unconverged
     // result gets REMESH_ROUNDS towards convergence, then as many for its folds.
     let mut in_mode = 0;
-    for round in 1..=2 * REMESH_ROUNDS {
-        if defects.counts() == (0, 0) || in_mode == REMESH_ROUNDS {
+    // One past the most rounds (REMESH_ROUNDS in each mode), so the limit is said.
+    for round in 1..=2 * REMESH_ROUNDS + 1 {
+        if defects.counts() == (0, 0) {
+            break;
+        }
+        if in_mode == REMESH_ROUNDS {
+            done.stop_reason = format!("the limit of {REMESH_ROUNDS} rounds was reached");
             break;
         }
         in_mode += 1;
