@@ -1615,7 +1615,7 @@ fn plain_from_best(
 }
 
 /// A flattenable result from the input that crumpled the surface (new creases past 60° on
-/// more than [`CRUMPLED`] of the edges, as the noisy saddles do) is replaced by the run from
+/// more than [`crate::geometry::CRUMPLED_SHARE`] of the edges, as the noisy saddles do) is replaced by the run from
 /// the developable cone when that one is accepted and creases less: "never crumple it"
 /// (issue 12) before closeness, since a crumpled sheet is no shape anyone can sew.
 fn uncrumple(
@@ -1629,7 +1629,9 @@ fn uncrumple(
     let (before, after) = (crease_count(mesh), crease_count(&out));
     let edges = out.conn().edges().len();
     let remaining = params.max_iterations.saturating_sub(first.iterations);
-    if (after.saturating_sub(before) as f64) <= CRUMPLED * edges as f64 || remaining == 0 {
+    let crumpled =
+        after.saturating_sub(before) as f64 > crate::geometry::CRUMPLED_SHARE * edges as f64;
+    if !crumpled || remaining == 0 {
         return Ok((out, first));
     }
     let new = after - before;
@@ -1689,10 +1691,6 @@ fn curved(mesh: &Mesh) -> Option<String> {
     (clear && (total >= CONE_FIRST_DOME || total <= -CONE_FIRST_SADDLE))
         .then(|| format!(" first (fitted total curvature {total:+.2} ± {error:.2} rad)"))
 }
-
-/// Share of the edges that may newly turn past 60° before a flattenable result counts as
-/// crumpled (the crumpled saddles of the corpus: 8–10 %; the converged domes: 0–0.1 %).
-const CRUMPLED: f64 = 0.01;
 
 /// `first` with the iterations and history of a later run whose result was not taken.
 fn absorb(first: &mut Report, second: &Report) {

@@ -69,7 +69,12 @@ pub struct ShapeCheck {
     pub min_angle_before: f64,
     /// Smallest corner angle of the output, degrees.
     pub min_angle_after: f64,
-    /// What a user should know: new folds, or new slivers below 1° (empty otherwise).
+    /// Edges of the input whose faces turn by more than 60° ([`crate::geometry::CREASE_ANGLE`]).
+    pub creases_before: usize,
+    /// Such edges of the output.
+    pub creases_after: usize,
+    /// What a user should know: new folds, new creases on more than 1 % of the edges
+    /// ([`crate::geometry::CRUMPLED_SHARE`]), or new slivers below 1° (empty otherwise).
     pub warnings: Vec<String>,
 }
 
@@ -98,10 +103,29 @@ pub fn check_shape(input: &Mesh, outcome: &JobOutcome) -> Option<ShapeCheck> {
     let (folds_before, fold_length_before) = folds(input);
     let (folds_after, fold_length_after) = folds(out);
     let (min_angle_before, min_angle_after) = (smallest(input), smallest(out));
+    let creases_before = crate::geometry::crease_count(input);
+    let creases_after = crate::geometry::crease_count(out);
+    let edges = out.conn().edges().len();
     let mut warnings = Vec::new();
     // New folds, by count and by length (a fold kept where it was, split by refinement,
     // counts more edges but no more length; 10 % allows for its vertices moving a little).
-    if folds_after > folds_before && fold_length_after > 1.1 * fold_length_before {
+    let folded = folds_after > folds_before && fold_length_after > 1.1 * fold_length_before;
+    // Without new folds an output can still be creased all over: fl-mesh's converged
+    // diffavatar_tshirt turns 868 of its 8249 edges past 60° (the input 12) and looks like
+    // crushed foil (rendered, issue 12 note of 2026-11-27, session 26).
+    let creased = creases_after.saturating_sub(creases_before) as f64
+        > crate::geometry::CRUMPLED_SHARE * edges as f64;
+    if creased && !folded {
+        warnings.push(format!(
+            "the output is creased all over: {creases_after} of its {edges} edges turn by \
+             more than 60° (the input's {creases_before}); look at mesh.glb before using it. \
+             A patch that cannot become flattenable smoothly with its boundary kept (e.g. a \
+             whole garment whose sleeves or legs join its body) creases instead: cut it into \
+             panels first (the segment job with then=fl-mesh makes each panel flattenable, \
+             or patches in the file)"
+        ));
+    }
+    if folded {
         warnings.push(format!(
             "the output is crumpled: {folds_after} edges fold (their faces turn by more than \
              120°), the input's {folds_before}; look at mesh.glb before using it. A patch that \
@@ -124,6 +148,8 @@ pub fn check_shape(input: &Mesh, outcome: &JobOutcome) -> Option<ShapeCheck> {
         fold_length_after,
         min_angle_before,
         min_angle_after,
+        creases_before,
+        creases_after,
         warnings,
     })
 }
@@ -334,5 +360,26 @@ mod tests {
         assert!(check.min_angle_after < SLIVER_DEGREES && check.min_angle_before == 45.0);
         assert_eq!(check.warnings.len(), 1, "{:?}", check.warnings);
         assert!(check.warnings[0].contains("sliver"));
+    }
+
+    /// A spike two units high turns 4 of the sheet's 16 edges by 70–79° and none past 120°:
+    /// creased all over without a fold, which is warned about; the 0.3 bump (turns below 25°)
+    /// is not.
+    #[test]
+    fn new_creases_on_many_edges_are_warned_about() {
+        let flat = sheet([1.0, 1.0, 0.0]);
+        let spike = sheet([1.0, 1.0, 2.0]);
+        assert_eq!(crate::geometry::fold_edges(&spike).len(), 0);
+        let check = check_shape(&flat, &outcome(spike)).unwrap();
+        assert_eq!((check.creases_before, check.creases_after), (0, 4));
+        assert_eq!(check.warnings.len(), 1, "{:?}", check.warnings);
+        assert!(
+            check.warnings[0].contains("creased all over: 4 of its 16 edges"),
+            "{:?}",
+            check.warnings
+        );
+        let bump = check_shape(&flat, &outcome(sheet([1.0, 1.0, 0.3]))).unwrap();
+        assert_eq!(bump.creases_after, 0);
+        assert!(bump.warnings.is_empty(), "{:?}", bump.warnings);
     }
 }
