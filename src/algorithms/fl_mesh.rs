@@ -814,7 +814,9 @@ fn new_defects(input: &Mesh, out: &Mesh, min_corner: f64) -> Defects {
 
 /// Rounds of [`remesh_defects`]. Measured (issue 12 note of 2026-11-27, 9 garments): one
 /// round was kept on six, two on GarmentTransfer's shirt and on MakeHuman's two female
-/// casual suits, a third never.
+/// casual suits, a third never. On unconverged results (session 26): all three were kept on
+/// mh_female_elegantsuit01 and an unseen male casual suit, where six took ϖ_max 1.4e-2 →
+/// 3.2e-3 instead of 5.3e-3, for 357 s instead of 251 s, still unconverged.
 const REMESH_ROUNDS: usize = 3;
 
 /// A result's new folds and slivers that unfolding left, mended by connectivity
@@ -1615,9 +1617,10 @@ fn plain_from_best(
 }
 
 /// A flattenable result from the input that crumpled the surface (new creases past 60° on
-/// more than [`crate::geometry::CRUMPLED_SHARE`] of the edges, as the noisy saddles do) is replaced by the run from
-/// the developable cone when that one is accepted and creases less: "never crumple it"
-/// (issue 12) before closeness, since a crumpled sheet is no shape anyone can sew.
+/// more than [`crate::geometry::CRUMPLED_SHARE`] of the edges, as the noisy saddles do) is
+/// replaced by the run from the developable cone when that one is accepted and creases less:
+/// "never crumple it" (issue 12) before closeness, since a crumpled sheet is no shape anyone
+/// can sew.
 fn uncrumple(
     mesh: &Mesh,
     params: &Params,

@@ -53,7 +53,8 @@ pub fn derive_patterns(outcome: &mut JobOutcome, control: &dyn Control) -> Resul
 
 /// How a mesh-changing job's output compares with its input in what no measure of
 /// flattenability sees: folds (edges whose faces turn by more than 120°,
-/// [`crate::geometry::FOLD_ANGLE`]) and the smallest corner angle (degrees).
+/// [`crate::geometry::FOLD_ANGLE`]), creases (more than 60°) and the smallest corner angle
+/// (degrees).
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct ShapeCheck {
     /// Folds of the input.
