@@ -112,7 +112,7 @@ pub fn check_shape(input: &Mesh, outcome: &JobOutcome) -> Option<ShapeCheck> {
     // counts more edges but no more length; 10 % allows for its vertices moving a little).
     let folded = folds_after > folds_before && fold_length_after > 1.1 * fold_length_before;
     // Without new folds an output can still be creased all over: fl-mesh's converged
-    // diffavatar_tshirt turns 868 of its 8249 edges past 60° (the input 12) and looks like
+    // diffavatar_tshirt turns 868 of its 8368 edges past 60° (the input 12) and looks like
     // crushed foil (rendered, issue 12 note of 2026-11-27, session 26).
     let creased = creases_after.saturating_sub(creases_before) as f64
         > crate::geometry::CRUMPLED_SHARE * edges as f64;
