@@ -182,17 +182,22 @@
 //!   remaining fold onto its neighbours' edge), and on
 //!   unseen garments GarmentTransfer's t-shirt 0 and 3 → 0 and 0, its shirt likewise, its
 //!   trousers 50 and 2 → 17 and 1; each re-solve took 0.2–0.5 s on these 3k-vertex meshes.
-//!   An unconverged result is remeshed too, each round kept when it lowers ϖ_max: the stalled
+//!   An unconverged result is remeshed too, each round kept when it lowers ϖ_max (a refused
+//!   round is tried once more with the slivers mended first): the stalled
 //!   whole garments carry new caps, needles and near-folded fans, where θ's linearisation
 //!   fails (on mh_female_elegantsuit01's stalled result a min-norm step scaled to 0.01 h̄
 //!   moved θ by 0.5 rad at caps beside the openings). Measured (issue 12 note of
 //!   2026-11-27, session 26; defaults, against the code before): mh_female_elegantsuit01
 //!   4.4e-3 → 2.9e-3 (folds 28 → 9, smallest corner 0.01° → 2.39°), mh_male_elegantsuit01
-//!   0.31 → 0.21 (folds 131 → 46); unseen MakeHuman suits: male casualsuit02 1.6e-2 →
+//!   0.31 → 0.17 (folds 131 → 56); unseen MakeHuman suits: male casualsuit02 1.6e-2 →
 //!   flattenable (47 folds → 2, smallest corner 2.19°), casualsuit01 1.4e-2 → 5.3e-3,
-//!   casualsuit03 3.4e-3 → 2.6e-3; no round kept on mh_male_worksuit01,
-//!   diffavatar_shirt_artist and male casualsuit05, which pay for the refused re-solve
-//!   (shirt_artist 203 → 269 s, casualsuit01 114 → 251 s with its three kept rounds).
+//!   casualsuit03 3.4e-3 → 6.6e-4, casualsuit05 1.4e-2 → 9.7e-3, mh_male_worksuit01 2.3e-2
+//!   → 6.7e-3 (the last three only through the second order: slivers first alone lost
+//!   casualsuit02's convergence, 2.6e-5); diffavatar_shirt_artist unchanged (both orders
+//!   refused). The re-solves cost time: worksuit 36 → 75 s, casualsuit05 39 → 121 s,
+//!   casualsuit01 114 → 245 s with its three kept rounds, shirt_artist 203 → 326 s for
+//!   nothing. Without refinement in the re-solve the gains vanish (elegantsuit and
+//!   casualsuit02 unchanged), so it keeps `refine`.
 //! - Detour through develop's SQP (`detour`, default on; [`detour`]). Whole garments (a sphere
 //!   with 3–11 holes, sleeves and legs joined to the body) stall with nearly every interior
 //!   vertex at the same small excess θ > 2π (mh_female_elegantsuit01's top: 2219 of 2227
@@ -826,8 +831,9 @@ const REMESH_ROUNDS: usize = 3;
 /// flattenable with fewer new folds plus slivers than before (as many: fewer folds). On an
 /// unconverged one (whose stall the slivers and folds feed: on the stalled suits the
 /// linearised θ is worst at caps and near-folded fans, where 0.01 h̄ of the step moves θ by
-/// 0.5 rad) a round is kept when it lowers ϖ_max, as the retries and the detour are; once a
-/// round made it flattenable, up to [`REMESH_ROUNDS`] more follow under the first rule.
+/// 0.5 rad) a round is kept when it lowers ϖ_max, as the retries and the detour are, and a
+/// refused round is tried once more with the slivers mended first; once a round made it
+/// flattenable, up to [`REMESH_ROUNDS`] more follow under the first rule.
 /// Vertices a collapse removed stay unreferenced, at the final position of the vertex they
 /// were merged into. A failure or stop of a round keeps the result before it.
 fn remesh_defects(
@@ -887,54 +893,76 @@ fn remesh_defects(
             .map(|&f| out.triangles()[f as usize])
             .collect();
         let movable = free_vertices(&out);
-        let task = super::remesh::Task {
-            folds: &folds,
-            slivers: &slivers,
-            movable: &movable,
-            min_corner,
-            slivers_first: false,
+        // An unconverged result whose round was refused tries the round once more with
+        // slivers first (the order of the mend, not its rule): on the stalled suits either
+        // order may be the one whose re-solve lowers ϖ_max.
+        let orders: &[bool] = if report.converged {
+            &[false]
+        } else {
+            &[false, true]
         };
-        // Slivers whose every mending folds an edge before the re-solve are tried again
-        // with slivers first: the re-solve may open the fold, and the round is judged after.
-        let mended = super::remesh::mend(&out, &task).or_else(|| {
-            let lenient = super::remesh::Task {
-                slivers_first: true,
-                ..task
-            };
-            super::remesh::mend(&out, &lenient)
-        });
-        let Some(mended) = mended else {
-            done.stop_reason = format!("round {round}: no flip or collapse improved its faces");
-            break;
-        };
-        let ctl = Renamed::after(control, "remesh");
-        let solved = solve_clear_of(&mended.mesh, &polish, None, &ctl)
-            .and_then(|(m, r)| open_new_folds(input, m, r, params, &ctl));
-        let (again, second) = match solved {
-            Ok(d) => d,
-            Err(e) => {
-                done.stop_reason = format!("round {round}: the re-solve failed: {e}");
+        let mut taken = None;
+        let mut refusal = String::new();
+        let mut tried_lenient = false;
+        for &slivers_first in orders {
+            if slivers_first && tried_lenient {
                 break;
             }
-        };
-        absorb(&mut report, &second);
-        let after = new_defects(input, &again, min_corner);
-        let kept = if report.converged {
-            second.converged && merit(&after) < merit(&defects)
-        } else {
-            // Unconverged: ϖ_max first (the issue's merit), as the retries and the detour.
-            second.converged || second.max_flattenability < report.max_flattenability
-        };
-        if !kept {
-            done.stop_reason = format!(
-                "round {round}: re-solved to ϖ_max {:.2e} with {} new folds and {} slivers, \
-                 not kept",
+            let task = super::remesh::Task {
+                folds: &folds,
+                slivers: &slivers,
+                movable: &movable,
+                min_corner,
+                slivers_first,
+            };
+            // Slivers whose every mending folds an edge before the re-solve are tried again
+            // with slivers first: the re-solve may open the fold, and the round is judged
+            // after.
+            let mended = super::remesh::mend(&out, &task).or_else(|| {
+                tried_lenient = true;
+                let lenient = super::remesh::Task {
+                    slivers_first: true,
+                    ..task
+                };
+                super::remesh::mend(&out, &lenient)
+            });
+            let Some(mended) = mended else {
+                refusal = "no flip or collapse improved its faces".into();
+                continue;
+            };
+            let ctl = Renamed::after(control, "remesh");
+            let solved = solve_clear_of(&mended.mesh, &polish, None, &ctl)
+                .and_then(|(m, r)| open_new_folds(input, m, r, params, &ctl));
+            let (again, second) = match solved {
+                Ok(d) => d,
+                Err(e) => {
+                    refusal = format!("the re-solve failed: {e}");
+                    break;
+                }
+            };
+            absorb(&mut report, &second);
+            let after = new_defects(input, &again, min_corner);
+            let kept = if report.converged {
+                second.converged && merit(&after) < merit(&defects)
+            } else {
+                // Unconverged: ϖ_max first (the issue's merit), as the retries and the detour.
+                second.converged || second.max_flattenability < report.max_flattenability
+            };
+            if kept {
+                taken = Some((mended, again, second, after));
+                break;
+            }
+            refusal = format!(
+                "re-solved to ϖ_max {:.2e} with {} new folds and {} slivers, not kept",
                 second.max_flattenability,
                 after.folds.len(),
                 after.slivers.len()
             );
-            break;
         }
+        let Some((mended, again, second, after)) = taken else {
+            done.stop_reason = format!("round {round}: {refusal}");
+            break;
+        };
         if second.converged && !report.converged {
             in_mode = 0;
             report.converged = true;
