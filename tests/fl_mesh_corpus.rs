@@ -69,9 +69,10 @@ fn checked_run(name: &str, mesh: &Mesh, params: &Params) -> (Mesh, fl_mesh::Repo
     let remeshed = report.remesh.as_ref().is_some_and(|r| r.rounds > 0);
     if let Some(r) = &report.remesh {
         // A round is kept on a lower ϖ_max when the result before it was unconverged, else on
-        // fewer new folds plus slivers; what it says it reached is what the output has.
+        // fewer new folds plus slivers (flattenable, so ϖ_max may move within the
+        // tolerance); what it says it reached is what the output has.
         assert!(
-            r.max_flattenability[1] <= r.max_flattenability[0],
+            r.max_flattenability[1] <= r.max_flattenability[0].max(params.tolerance),
             "{name}: {r:?}"
         );
         assert_eq!(r.max_flattenability[1], m.varpi_out, "{name}: {r:?}");
