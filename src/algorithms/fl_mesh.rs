@@ -250,6 +250,25 @@ pub enum StepRule {
     Lm,
 }
 
+/// Where an fl-mesh job's seams come from: the patches are what must each be flattenable, and
+/// their seams are held (see [`choose_patches`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Patches {
+    /// `uv` when the file's texture layout cuts its patches into islands (at most
+    /// [`MAX_AUTO_ISLANDS`]), else `file`.
+    #[default]
+    Auto,
+    /// The file's patches (OBJ `o`/`g`, glTF primitives).
+    File,
+    /// One patch per texture-coordinate island, inside the file's patches.
+    Uv,
+}
+
+/// More islands than this look like a texture atlas rather than a sewing pattern (the real
+/// garments and shoes have 3–45), so `patches=auto` keeps the file's patches.
+pub const MAX_AUTO_ISLANDS: usize = 256;
+
 /// When to start from the developable cone over a disk's boundary (`cone` module).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize)]
 #[serde(rename_all = "lowercase")]
@@ -376,6 +395,10 @@ pub struct Params {
     /// vertex stays in the output unreferenced, so the numbering holds. Not with
     /// `until = stationary`.
     pub remesh: bool,
+    /// `auto` (default), `file` or `uv`: the seams of an fl-mesh job's input (see
+    /// [`choose_patches`]). Only [`run`] reads it: [`solve`] (and so subdivide and segment)
+    /// takes the mesh's patches as they are.
+    pub patches: Patches,
 }
 
 impl Default for Params {
@@ -403,6 +426,7 @@ impl Default for Params {
             unfold: true,
             detour: true,
             remesh: true,
+            patches: Patches::Auto,
         }
     }
 }
@@ -597,16 +621,32 @@ pub struct Summary {
     pub report: Report,
     /// Hausdorff distance from the output to the input.
     pub hausdorff_to_input: super::Distance,
+    /// The patches solved for and where they came from.
+    pub patches: PatchesUsed,
 }
 
-/// Run `fl-mesh`.
+/// The patches an fl-mesh job solved for.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct PatchesUsed {
+    /// `file` or `uv`.
+    pub source: String,
+    /// How many.
+    pub count: usize,
+    /// Edges of the file's patches cut by the texture layout (0 without one).
+    pub uv_seam_edges: usize,
+    /// Why this source.
+    pub reason: String,
+}
+
+/// Run `fl-mesh`: on the patches `params.patches` chooses ([`choose_patches`]).
 pub fn run(
     mesh: &Mesh,
     params: &Params,
     control: &dyn Control,
 ) -> Result<Outcome<Summary>, AlgoError> {
     params.check()?;
-    let (out, report) = solve(mesh, params, control)?;
+    let (work, patches) = choose_patches(mesh, params.patches)?;
+    let (out, report) = solve(&work, params, control)?;
     let hausdorff_to_input = super::Distance::hausdorff(&out, mesh);
     Ok(Outcome {
         mesh: Some(out),
@@ -614,9 +654,89 @@ pub fn run(
         summary: Summary {
             report,
             hausdorff_to_input,
+            patches,
         },
         levels: Vec::new(),
     })
+}
+
+/// The mesh whose patches fl-mesh makes flattenable. A garment is sewn from panels, and a
+/// file from a design tool carries them as its texture layout's islands; solved whole instead,
+/// a garment with sleeves or legs must push the curvature of its armpits and crotch into its
+/// fixed openings (Gauss–Bonnet), and converges, if at all, by creasing all over (issue 12
+/// note of 2026-11-27: diffavatar_tshirt whole 7.2 s, hd 8.6 %, 868 new creases; by its four
+/// islands 0.5 s, hd 2.1 %; mh_female_elegantsuit01 stalls whole at 2.9e-3 and converges by
+/// its islands in 0.6 s). `auto` takes the islands when the layout cuts the file's patches
+/// and has at most [`MAX_AUTO_ISLANDS`] islands; `uv` requires a layout.
+pub fn choose_patches(mesh: &Mesh, wanted: Patches) -> Result<(Mesh, PatchesUsed), AlgoError> {
+    use crate::mesh::islands;
+    let file = |reason: String, seams: usize| {
+        (
+            mesh.clone(),
+            PatchesUsed {
+                source: "file".into(),
+                count: mesh.num_patches(),
+                uv_seam_edges: seams,
+                reason,
+            },
+        )
+    };
+    let found = match wanted {
+        Patches::File => return Ok(file("asked for (patches=file)".into(), 0)),
+        _ => islands::uv_islands(mesh),
+    };
+    let Some(found) = found else {
+        if wanted == Patches::Uv {
+            return Err(bad(
+                "patches",
+                "`uv` needs texture coordinates on every face, and the mesh has none".into(),
+            ));
+        }
+        return Ok(file("the file has no texture coordinates".into(), 0));
+    };
+    let seams = found.seam_edges;
+    if wanted == Patches::Auto {
+        if seams == 0 {
+            return Ok(file(
+                "its texture layout cuts none of the file's patches".into(),
+                0,
+            ));
+        }
+        if found.count() > MAX_AUTO_ISLANDS {
+            return Ok(file(
+                format!(
+                    "its texture layout has {} islands, more than the {MAX_AUTO_ISLANDS} of \
+                     a sewing pattern (patches=uv takes them anyway)",
+                    found.count()
+                ),
+                seams,
+            ));
+        }
+    }
+    let (cut, _) = islands::with_island_patches(mesh, &found).map_err(|e| {
+        bad(
+            "patches",
+            format!("the texture islands do not make a valid mesh: {e}"),
+        )
+    })?;
+    let reason = match wanted {
+        Patches::Uv => "asked for (patches=uv)".to_string(),
+        _ => format!(
+            "the file's texture layout cuts it into {} islands along {seams} edges, taken as \
+             its panels (patches=file solves the file's {} patch(es) instead)",
+            found.count(),
+            mesh.num_patches()
+        ),
+    };
+    Ok((
+        cut,
+        PatchesUsed {
+            source: "uv".into(),
+            count: found.count(),
+            uv_seam_edges: seams,
+            reason,
+        },
+    ))
 }
 
 /// The solver proper: the output mesh (input vertices first, refinement vertices after) and

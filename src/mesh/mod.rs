@@ -22,6 +22,7 @@
 //! | unreferenced vertex | kept (indices stay the file's) but ignored by every measure, with a warning |
 
 mod connectivity;
+pub mod islands;
 
 pub use connectivity::{Connectivity, PatchTopology, VertexKind, NONE};
 
