@@ -313,6 +313,12 @@ fn run(
     for w in outcome.shape.iter().flat_map(|s| &s.warnings) {
         eprintln!("flatmesh: warning: {w}");
     }
+    // Seams the file did not name change what "flattenable" means for this output: say so.
+    if let flatmesh::jobs::Figures::FlMesh(s) = &outcome.figures {
+        if s.patches.source == "uv" {
+            eprintln!("flatmesh: patches: {}", s.patches.reason);
+        }
+    }
     for w in &outcome.pattern_warnings {
         eprintln!("flatmesh: warning: patterns of the output: {w}");
     }

@@ -41,7 +41,8 @@ fn run_fl_mesh_writes_a_flattenable_mesh_and_its_report() {
     if flatmesh::corpus::shared_root_for_tests("cli fl-mesh on the t-shirt").is_none() {
         return;
     }
-    let refined = check_run("tshirt", &[]);
+    // The file's one patch: the whole garment (its texture islands are the next test's).
+    let refined = check_run("tshirt", &["patches=file"]);
     println!("defaults: {refined} vertices refined");
 }
 
@@ -56,9 +57,145 @@ fn run_fl_mesh_with_refinement_appends_vertices() {
     }
     let refined = check_run(
         "tshirt-refine",
-        &["stall_iterations=8", "shape_penalty=0", "step_radius=0"],
+        &[
+            "stall_iterations=8",
+            "shape_penalty=0",
+            "step_radius=0",
+            "patches=file",
+        ],
     );
     assert!(refined > 0, "no refinement happened");
+}
+
+/// The t-shirt's texture layout cuts it into front, back and sleeves; by default those islands
+/// are the patches made flattenable. Checked from the files: the patches of mesh.obj are the
+/// pieces the input's `vt` cuts leave (recomputed here from the OBJ text), ϖ is
+/// recomputed from mesh.obj, the seams and the boundary do not move, no edge folds, and the
+/// surface stays closer to the input than the whole garment's run does (8.6 % on 2026-11-27).
+#[test]
+fn run_fl_mesh_takes_a_garments_texture_islands_as_its_panels() {
+    if flatmesh::corpus::shared_root_for_tests("cli fl-mesh by texture islands").is_none() {
+        return;
+    }
+    let input = Path::new("../shared/meshes/garment/diffavatar_tshirt.obj");
+    let dir = tmp("islands");
+    let st = bin()
+        .args(["run", "fl-mesh"])
+        .arg(input)
+        .arg("--out")
+        .arg(&dir)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&st.stderr);
+    assert!(st.status.success(), "{stderr}");
+    assert!(stderr.contains("flatmesh: patches: "), "{stderr}");
+    let rep: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("report.json")).unwrap()).unwrap();
+    assert_eq!(
+        rep["job"]["patches"]["source"], "uv",
+        "{}",
+        rep["job"]["patches"]
+    );
+    assert_eq!(rep["job"]["converged"], serde_json::json!(true));
+
+    // The cut edges, from the OBJ text: an edge whose two faces give one of its ends different
+    // texture coordinates.
+    let text = std::fs::read_to_string(input).unwrap();
+    let (mut vt, mut corners) = (Vec::<(String, String)>::new(), Vec::new());
+    for line in text.lines() {
+        let mut it = line.split_whitespace();
+        match it.next() {
+            Some("vt") => vt.push((it.next().unwrap().into(), it.next().unwrap().into())),
+            Some("f") => {
+                let c: Vec<(usize, usize)> = it
+                    .map(|w| {
+                        let mut p = w.split('/');
+                        let v = p.next().unwrap().parse::<usize>().unwrap() - 1;
+                        (v, p.next().unwrap().parse::<usize>().unwrap() - 1)
+                    })
+                    .collect();
+                corners.push(c);
+            }
+            _ => {}
+        }
+    }
+    let mut at: std::collections::HashMap<(usize, usize), Vec<&(String, String)>> =
+        Default::default();
+    for face in &corners {
+        let n = face.len();
+        for k in 0..n {
+            let ((a, ta), (b, tb)) = (face[k], face[(k + 1) % n]);
+            let key = (a.min(b), a.max(b));
+            let (ua, ub) = (&vt[ta], &vt[tb]);
+            at.entry(key)
+                .or_default()
+                .extend(if a < b { [ua, ub] } else { [ub, ua] });
+        }
+    }
+    let cut: std::collections::BTreeSet<(usize, usize)> = at
+        .iter()
+        .filter(|(_, u)| u.len() == 4 && (u[0] != u[2] || u[1] != u[3]))
+        .map(|(e, _)| *e)
+        .collect();
+    assert!(!cut.is_empty());
+
+    let inp = flatmesh::io::load_path(input).unwrap().0;
+    let out = flatmesh::io::load_path(&dir.join("mesh.obj")).unwrap().0;
+    assert_eq!(out.num_patches(), 4, "{:?}", out.patch_names());
+    let mut seams = std::collections::BTreeSet::new();
+    for (e, &[f, g]) in out.conn().edge_faces().iter().enumerate() {
+        if g != flatmesh::mesh::NONE && out.face_patch()[f as usize] != out.face_patch()[g as usize]
+        {
+            let [a, b] = out.conn().edges()[e];
+            seams.insert((a as usize, b as usize));
+        }
+    }
+    // Every seam is a cut; a cut inside one island (a slit from the hem) stays welded.
+    assert!(seams.is_subset(&cut), "{:?}", seams.difference(&cut));
+    // Each patch is one piece through edges the layout does not cut: with the above, the
+    // patches are exactly the layout's islands.
+    let (edges, faces) = (out.conn().edges(), out.conn().edge_faces());
+    let mut piece: Vec<usize> = (0..out.num_faces()).collect();
+    fn root(p: &mut [usize], mut x: usize) -> usize {
+        while p[x] != x {
+            x = p[x];
+        }
+        x
+    }
+    for (e, &[f, g]) in faces.iter().enumerate() {
+        let [a, b] = edges[e];
+        if g != flatmesh::mesh::NONE && !cut.contains(&(a as usize, b as usize)) {
+            let (rf, rg) = (root(&mut piece, f as usize), root(&mut piece, g as usize));
+            piece[rf] = rg;
+        }
+    }
+    let mut roots = std::collections::BTreeSet::new();
+    for f in 0..out.num_faces() {
+        roots.insert((out.face_patch()[f], root(&mut piece, f)));
+    }
+    assert_eq!(roots.len(), out.num_patches());
+
+    let w = geometry::flattenability(&out, &geometry::angle_sums(&out))
+        .into_iter()
+        .fold(0.0, f64::max);
+    assert!(w <= 1e-6, "ϖ_max {w:e} recomputed from mesh.obj");
+    let on_seam: std::collections::BTreeSet<usize> =
+        seams.iter().flat_map(|&(a, b)| [a, b]).collect();
+    for v in 0..inp.num_vertices() {
+        let interior = inp.conn().is_interior(v as u32) && !on_seam.contains(&v);
+        if !interior {
+            assert_eq!(inp.positions()[v], out.positions()[v], "vertex {v} moved");
+        }
+    }
+    assert!(geometry::fold_edges(&out).len() <= geometry::fold_edges(&inp).len());
+    let rel = rep["job"]["hausdorff_to_input"]["relative"]
+        .as_f64()
+        .unwrap();
+    let (lo, hi) = inp.bbox();
+    let bound = nearest_vertex_max(&out, &inp).max(nearest_vertex_max(&inp, &out));
+    assert!(rel * dist(lo, hi) <= bound * (1.0 + 1e-9));
+    assert!(rel < 0.04, "moved {:.2} % of the diagonal", 100.0 * rel);
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// Run the binary on the t-shirt with `sets`, check every promise, return how many vertices

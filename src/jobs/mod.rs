@@ -161,7 +161,11 @@ impl Kind {
                  min_angle that a result still has after unfold are mended by edge flips and \
                  collapses and solved again, kept when that leaves fewer, or, on an \
                  unconverged result, when that lowers the max flattenability; a collapsed \
-                 vertex stays in the output unreferenced; not with until=stationary)"
+                 vertex stays in the output unreferenced; not with until=stationary), \
+                 patches=auto|file|uv (auto: the islands of the file's texture layout are the \
+                 patches when they cut the file's into at most 256, else the file's o/g \
+                 groups or glTF primitives; each patch is made flattenable on its own, its \
+                 seams held)"
             }
             Kind::Subdivide => {
                 "levels (1; or --levels), curves (or --curves), split_ratio (0.5), \

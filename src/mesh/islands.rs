@@ -7,7 +7,9 @@
 //!
 //! Two faces of one patch are in one island when they share an edge whose two endpoints have
 //! the same texture coordinates in both faces (compared exactly: an exporter writes a shared
-//! corner once). Islands never cross the file's patches, so they refine them.
+//! corner once). Islands never cross the file's patches, so they refine them. A cut that ends
+//! inside one island (a slit from the hem, as on diffavatar_tshirt's front) is no seam: its
+//! faces stay in one patch, welded, and its vertices must be flat like any other.
 
 use super::{Mesh, MeshError, RawMesh, Warning, NONE};
 
@@ -18,7 +20,8 @@ pub struct UvIslands {
     pub face_island: Vec<u32>,
     /// The file's patch each island lies in.
     pub island_patch: Vec<u32>,
-    /// Edges inside a patch whose two faces disagree on the texture coordinates: the cuts.
+    /// Edges inside a patch whose two faces disagree on the texture coordinates: the cuts
+    /// (a slit inside one island included).
     pub seam_edges: usize,
 }
 
