@@ -179,12 +179,32 @@ fn run_fl_mesh_takes_a_garments_texture_islands_as_its_panels() {
         .into_iter()
         .fold(0.0, f64::max);
     assert!(w <= 1e-6, "ϖ_max {w:e} recomputed from mesh.obj");
-    let on_seam: std::collections::BTreeSet<usize> =
-        seams.iter().flat_map(|&(a, b)| [a, b]).collect();
-    for v in 0..inp.num_vertices() {
-        let interior = inp.conn().is_interior(v as u32) && !on_seam.contains(&v);
-        if !interior {
-            assert_eq!(inp.positions()[v], out.positions()[v], "vertex {v} moved");
+    // A cut inside an island (a slit) is opened: no cut edge joins two faces of one patch.
+    for (e, &[f, g]) in faces.iter().enumerate() {
+        let [a, b] = edges[e];
+        if g != flatmesh::mesh::NONE && cut.contains(&(a as usize, b as usize)) {
+            assert_ne!(out.face_patch()[f as usize], out.face_patch()[g as usize]);
+        }
+    }
+    // Held vertices (boundary, seams, the opened slits) are where they were; the copies that
+    // open a slit sit on an input vertex.
+    let opened = rep["job"]["patches"]["opened_vertices"].as_u64().unwrap() as usize;
+    assert!(opened > 0, "the t-shirt's front is slit from its hem");
+    assert!(out.num_vertices() >= inp.num_vertices() + opened);
+    for v in 0..inp.num_vertices() + opened {
+        if !out.conn().is_interior(v as u32) {
+            let p = out.positions()[v];
+            let at = if v < inp.num_vertices() {
+                inp.positions()[v]
+            } else {
+                *inp.positions()
+                    .iter()
+                    .find(|&&q| q == p)
+                    .expect("a copy of a vertex")
+            };
+            assert_eq!(at, p, "held vertex {v} moved");
+        } else {
+            assert!(v < inp.num_vertices(), "copy {v} is interior");
         }
     }
     assert!(geometry::fold_edges(&out).len() <= geometry::fold_edges(&inp).len());

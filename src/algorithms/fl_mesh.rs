@@ -634,6 +634,9 @@ pub struct PatchesUsed {
     pub count: usize,
     /// Edges of the file's patches cut by the texture layout (0 without one).
     pub uv_seam_edges: usize,
+    /// Vertices appended (copies) to open the cuts that end inside an island; the output's
+    /// vertices after the input's (and before any refinement's) are these.
+    pub opened_vertices: usize,
     /// Why this source.
     pub reason: String,
 }
@@ -677,6 +680,7 @@ pub fn choose_patches(mesh: &Mesh, wanted: Patches) -> Result<(Mesh, PatchesUsed
                 source: "file".into(),
                 count: mesh.num_patches(),
                 uv_seam_edges: seams,
+                opened_vertices: 0,
                 reason,
             },
         )
@@ -713,27 +717,41 @@ pub fn choose_patches(mesh: &Mesh, wanted: Patches) -> Result<(Mesh, PatchesUsed
             ));
         }
     }
-    let (cut, _) = islands::with_island_patches(mesh, &found).map_err(|e| {
-        bad(
-            "patches",
-            format!("the texture islands do not make a valid mesh: {e}"),
-        )
-    })?;
+    let cut = match islands::with_island_patches(mesh, &found) {
+        Ok(cut) => cut,
+        Err(e) if wanted == Patches::Auto => {
+            return Ok(file(
+                format!("its texture islands do not make a valid mesh ({e})"),
+                seams,
+            ))
+        }
+        Err(e) => {
+            return Err(bad(
+                "patches",
+                format!("the texture islands do not make a valid mesh: {e}"),
+            ))
+        }
+    };
+    let opened = match cut.opened {
+        0 => String::new(),
+        n => format!(", {n} vertices split to open the cuts inside an island (a tube's seam)"),
+    };
     let reason = match wanted {
-        Patches::Uv => "asked for (patches=uv)".to_string(),
+        Patches::Uv => format!("asked for (patches=uv){opened}"),
         _ => format!(
-            "the file's texture layout cuts it into {} islands along {seams} edges, taken as \
-             its panels (patches=file solves the file's {} patch(es) instead)",
+            "the file's texture layout cuts it into {} islands along {seams} edges{opened}, \
+             taken as its panels (patches=file solves the file's {} patch(es) instead)",
             found.count(),
             mesh.num_patches()
         ),
     };
     Ok((
-        cut,
+        cut.mesh,
         PatchesUsed {
             source: "uv".into(),
             count: found.count(),
             uv_seam_edges: seams,
+            opened_vertices: cut.opened,
             reason,
         },
     ))
@@ -3610,6 +3628,79 @@ pub fn refine_sqrt3(mesh: &Mesh, vertices: &[u32]) -> RawMesh {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A flat 4×1 strip of squares, its layout cut (when `cut`) between the second and third.
+    fn strip_with_layout(cut: bool) -> Mesh {
+        let positions: Vec<[f64; 3]> = (0..5)
+            .flat_map(|i| [[i as f64, 0.0, 0.0], [i as f64, 1.0, 0.0]])
+            .collect();
+        let mut triangles = Vec::new();
+        for i in 0..4u32 {
+            triangles.push([2 * i, 2 * i + 2, 2 * i + 3]);
+            triangles.push([2 * i, 2 * i + 3, 2 * i + 1]);
+        }
+        let mut coords: Vec<[f64; 2]> = positions.iter().map(|p| [p[0], p[1]]).collect();
+        coords.extend([[2.5, 0.0], [2.5, 1.0]]);
+        let uv = triangles
+            .iter()
+            .enumerate()
+            .map(|(f, t)| {
+                t.map(|v| {
+                    if cut && f >= 4 && (4..=5).contains(&v) {
+                        v + 6
+                    } else {
+                        v
+                    }
+                })
+            })
+            .collect();
+        Mesh::new(crate::mesh::RawMesh {
+            positions,
+            face_patch: vec![0; triangles.len()],
+            triangles,
+            patch_names: vec!["default".into()],
+            uv: Some(crate::mesh::UvLayer {
+                coords,
+                triangles: uv,
+            }),
+        })
+        .expect("valid")
+        .0
+    }
+
+    #[test]
+    fn the_patches_follow_the_layout_only_where_it_cuts() {
+        let cut = strip_with_layout(true);
+        let (m, used) = choose_patches(&cut, Patches::Auto).expect("chosen");
+        assert_eq!(
+            (used.source.as_str(), used.count, used.uv_seam_edges),
+            ("uv", 2, 1)
+        );
+        assert_eq!(m.num_patches(), 2);
+        let (m, used) = choose_patches(&cut, Patches::File).expect("chosen");
+        assert_eq!((used.source.as_str(), m.num_patches()), ("file", 1));
+        // An uncut layout leaves the file's patches, even when asked for.
+        let whole = strip_with_layout(false);
+        let (_, used) = choose_patches(&whole, Patches::Auto).expect("chosen");
+        assert_eq!(used.source, "file");
+        let (m, used) = choose_patches(&whole, Patches::Uv).expect("chosen");
+        assert_eq!((used.source.as_str(), m.num_patches()), ("uv", 1));
+        // No layout: auto keeps the file's, uv is refused by name.
+        let bare = Mesh::new(crate::mesh::RawMesh {
+            uv: None,
+            ..cut.to_raw()
+        })
+        .expect("valid")
+        .0;
+        assert_eq!(
+            choose_patches(&bare, Patches::Auto).unwrap().1.source,
+            "file"
+        );
+        match choose_patches(&bare, Patches::Uv) {
+            Err(AlgoError::InvalidParam { key, .. }) => assert_eq!(key, "patches"),
+            other => panic!("{other:?}"),
+        }
+    }
 
     /// The shape penalty's force is −∇ of ½ κ h̄² (Σ (φ − φ⁰)₊² + Σ (α⁰ − α)₊²), by central
     /// differences, on a flat disk with one vertex moved so that both parts are active.

@@ -8,10 +8,13 @@
 //! Two faces of one patch are in one island when they share an edge whose two endpoints have
 //! the same texture coordinates in both faces (compared exactly: an exporter writes a shared
 //! corner once). Islands never cross the file's patches, so they refine them. A cut that ends
-//! inside one island (a slit from the hem, as on diffavatar_tshirt's front) is no seam: its
-//! faces stay in one patch, welded, and its vertices must be flat like any other.
+//! inside one island (a slit: most tubes, a sleeve or a trouser leg, are laid out flat by one)
+//! cannot be a seam between patches, so it is opened by splitting its vertices
+//! ([`with_island_patches`]); held fixed, it stays closed in space. Measured on the real
+//! garments, 0–194 of their cut edges are slits.
 
-use super::{Mesh, MeshError, RawMesh, Warning, NONE};
+use super::{Mesh, MeshError, RawMesh, NONE};
+use std::collections::HashMap;
 
 /// The UV islands of a mesh, each inside one of its patches.
 #[derive(Debug, Clone, PartialEq)]
@@ -86,13 +89,23 @@ pub fn uv_islands(mesh: &Mesh) -> Option<UvIslands> {
     })
 }
 
-/// `mesh` with one patch per island: named `island<k>`, or `<patch>.island<k>` when the file
-/// named its patches (k from 1, largest first). Positions, faces and texture coordinates are
-/// kept; only the seams change, so vertices on an island's rim are no longer interior.
-pub fn with_island_patches(
-    mesh: &Mesh,
-    islands: &UvIslands,
-) -> Result<(Mesh, Vec<Warning>), MeshError> {
+/// A mesh cut along its texture layout.
+#[derive(Debug, Clone)]
+pub struct IslandMesh {
+    /// One patch per island; the slits opened.
+    pub mesh: Mesh,
+    /// Vertices appended to open the slits (copies of the vertex they split from).
+    pub opened: usize,
+}
+
+/// `mesh` with one patch per island, named `island<k>`, or `<patch>.island<k>` when the file
+/// named its patches (k from 1, largest first), and every cut that ends inside an island (a
+/// slit: a sleeve's or a trouser leg's seam, which closes the island into a tube) opened: a
+/// vertex that has several texture coordinates within one island keeps its index for the
+/// first face that names it and gets a copy, appended, for each other coordinate. The copies
+/// sit where the vertex is and lie on the opened cut, so they are held like any boundary
+/// vertex. Positions, faces and texture coordinates are otherwise kept.
+pub fn with_island_patches(mesh: &Mesh, islands: &UvIslands) -> Result<IslandMesh, MeshError> {
     let names = mesh.patch_names();
     let unnamed = names.len() == 1 && names[0] == "default";
     let patch_names = islands
@@ -107,11 +120,35 @@ pub fn with_island_patches(
             }
         })
         .collect();
-    Mesh::new(RawMesh {
+    let mut raw = mesh.to_raw();
+    if let Some(uv) = mesh.uv() {
+        let mut first: HashMap<(u32, u32), [u64; 2]> = HashMap::new();
+        let mut copies: HashMap<(u32, u32, [u64; 2]), u32> = HashMap::new();
+        for (f, t) in raw.triangles.iter_mut().enumerate() {
+            let island = islands.face_island[f];
+            for (k, v) in t.iter_mut().enumerate() {
+                let Some(c) = uv.coords.get(uv.triangles[f][k] as usize) else {
+                    continue;
+                };
+                let c = [c[0].to_bits(), c[1].to_bits()];
+                let seen = *first.entry((*v, island)).or_insert(c);
+                if seen != c {
+                    let positions = &mut raw.positions;
+                    *v = *copies.entry((*v, island, c)).or_insert_with(|| {
+                        positions.push(positions[*v as usize]);
+                        (positions.len() - 1) as u32
+                    });
+                }
+            }
+        }
+    }
+    let opened = raw.positions.len() - mesh.num_vertices();
+    let (mesh, _) = Mesh::new(RawMesh {
         face_patch: islands.face_island.clone(),
         patch_names,
-        ..mesh.to_raw()
-    })
+        ..raw
+    })?;
+    Ok(IslandMesh { mesh, opened })
 }
 
 #[cfg(test)]
@@ -170,13 +207,66 @@ mod tests {
         assert_eq!(is.count(), 2);
         assert_eq!(is.seam_edges, 1);
         assert_eq!(is.face_island, vec![0, 0, 0, 0, 1, 1, 1, 1]);
-        let (p, _) = with_island_patches(&m, &is).expect("valid");
+        let cut = with_island_patches(&m, &is).expect("valid");
+        assert_eq!(cut.opened, 0);
+        let p = cut.mesh;
         assert_eq!(p.patch_names(), ["island1", "island2"]);
         // The cut's two vertices now lie on a seam; the welded mesh had none there.
         assert!(m.conn().shared_vertices().is_empty());
         assert_eq!(p.conn().shared_vertices(), [4, 5]);
         assert_eq!(p.positions(), m.positions());
         assert_eq!(p.triangles(), m.triangles());
+    }
+
+    /// A flat 3×3 grid whose layout is slit from the bottom edge's middle (vertex 1) to the
+    /// centre (vertex 4): one island, one cut edge; vertex 1 is copied for the faces right of
+    /// the slit, the centre (the slit's tip, one coordinate) is not, and becomes a boundary
+    /// vertex of the opened sheet.
+    #[test]
+    fn a_slit_inside_an_island_is_opened() {
+        let positions: Vec<[f64; 3]> = (0..9)
+            .map(|i| [(i % 3) as f64, (i / 3) as f64, 0.0])
+            .collect();
+        let mut triangles = Vec::new();
+        for (x, y) in [(0u32, 0u32), (1, 0), (0, 1), (1, 1)] {
+            let a = 3 * y + x;
+            triangles.push([a, a + 1, a + 4]);
+            triangles.push([a, a + 4, a + 3]);
+        }
+        let mut coords: Vec<[f64; 2]> = positions.iter().map(|p| [p[0], p[1]]).collect();
+        coords.push([1.1, 0.0]);
+        // Faces 2 and 3 (the bottom-right square) see vertex 1 at the copy.
+        let uv_tris = triangles
+            .iter()
+            .enumerate()
+            .map(|(f, t)| t.map(|v| if v == 1 && (f == 2 || f == 3) { 9 } else { v }))
+            .collect();
+        let m = Mesh::new(RawMesh {
+            positions,
+            face_patch: vec![0; 8],
+            triangles,
+            patch_names: vec!["default".into()],
+            uv: Some(UvLayer {
+                coords,
+                triangles: uv_tris,
+            }),
+        })
+        .expect("valid")
+        .0;
+        assert!(m.conn().is_interior(4));
+        let is = uv_islands(&m).expect("has uv");
+        assert_eq!((is.count(), is.seam_edges), (1, 1));
+        let cut = with_island_patches(&m, &is).expect("valid");
+        assert_eq!(cut.opened, 1);
+        let p = cut.mesh;
+        assert_eq!(p.num_vertices(), 10);
+        assert_eq!(p.positions()[9], p.positions()[1]);
+        assert!(
+            !p.conn().is_interior(4),
+            "the slit's tip is on the opened cut"
+        );
+        assert_eq!(p.conn().boundary_loops().len(), 1);
+        assert_eq!(p.conn().boundary_loops()[0].len(), 10);
     }
 
     #[test]
