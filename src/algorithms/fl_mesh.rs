@@ -648,8 +648,45 @@ pub fn run(
     control: &dyn Control,
 ) -> Result<Outcome<Summary>, AlgoError> {
     params.check()?;
-    let (work, patches) = choose_patches(mesh, params.patches)?;
-    let (out, report) = solve(&work, params, control)?;
+    let (work, mut patches) = choose_patches(mesh, params.patches)?;
+    let (mut out, mut report) = solve(&work, params, control)?;
+    // Islands chosen by `auto` that do not all become flattenable: the file's patches are
+    // tried too, and taken when they do (mh_fedora, unseen: its crown and brim stall at
+    // 1.3e-2 by islands, whole it converges on the developable cone over its rim).
+    if !report.converged && patches.source == "uv" && params.patches == Patches::Auto {
+        let (whole, whole_report) = solve(
+            mesh,
+            params,
+            &Renamed::before(control, "file patches".into()),
+        )?;
+        let islands_max = report.max_flattenability;
+        if whole_report.converged {
+            patches = PatchesUsed {
+                source: "file".into(),
+                count: mesh.num_patches(),
+                reason: format!(
+                    "by its {} texture islands it stalled at ϖ_max {islands_max:.2e}; by the \
+                     file's {} patch(es) it became flattenable",
+                    patches.count,
+                    mesh.num_patches()
+                ),
+                opened_vertices: 0,
+                ..patches
+            };
+            out = whole;
+            report = chain(report, whole_report, |a, b| {
+                format!("by the texture islands: {a}; by the file's patches: {b}")
+            });
+        } else {
+            absorb(&mut report, &whole_report);
+            patches.reason = format!(
+                "{}; the file's {} patch(es) did not become flattenable either (ϖ_max {:.2e})",
+                patches.reason,
+                mesh.num_patches(),
+                whole_report.max_flattenability
+            );
+        }
+    }
     let hausdorff_to_input = super::Distance::hausdorff(&out, mesh);
     Ok(Outcome {
         mesh: Some(out),
