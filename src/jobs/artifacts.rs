@@ -122,8 +122,9 @@ pub fn check_shape(input: &Mesh, outcome: &JobOutcome) -> Option<ShapeCheck> {
              more than 60° (the input's {creases_before}); look at mesh.glb before using it. \
              A patch that cannot become flattenable smoothly with its boundary kept (e.g. a \
              whole garment whose sleeves or legs join its body) creases instead: cut it into \
-             panels first (the segment job with then=fl-mesh makes each panel flattenable, \
-             or patches in the file)"
+             panels first (the segment job with then=fl-mesh makes each panel flattenable; \
+             or give the panels as patches in the file, or as islands of its texture layout, \
+             which fl-mesh takes by default)"
         ));
     }
     if folded {
@@ -132,8 +133,9 @@ pub fn check_shape(input: &Mesh, outcome: &JobOutcome) -> Option<ShapeCheck> {
              120°), the input's {folds_before}; look at mesh.glb before using it. A patch that \
              cannot become flattenable smoothly with its boundary kept (e.g. a whole garment \
              whose sleeves or legs join its body) folds there: cut it into panels first \
-             (the segment job with then=fl-mesh makes each panel flattenable, or patches in \
-             the file)"
+             (the segment job with then=fl-mesh makes each panel flattenable; or give the \
+             panels as patches in the file, or as islands of its texture layout, which \
+             fl-mesh takes by default)"
         ));
     }
     if min_angle_after < SLIVER_DEGREES.min(min_angle_before) {
