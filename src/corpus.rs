@@ -564,8 +564,11 @@ pub struct Row {
     pub seconds: f64,
 }
 
-/// Run fl-mesh on `mesh` as the job does (on the patches `params.patches` chooses) and measure
-/// the result against the mesh it solved, so that ϖ in and out are over the same patches.
+/// Run fl-mesh on `mesh` as the job does ([`fl_mesh::run`]: on the patches `params.patches`
+/// chooses, and back to the file's when those stall) and measure the result against the mesh
+/// with the patches it solved, so that ϖ in and out are over the same patches.
+///
+/// [`fl_mesh::run`]: crate::algorithms::fl_mesh::run
 pub fn run_fl_mesh(
     name: &str,
     mesh: &Mesh,
@@ -573,18 +576,25 @@ pub fn run_fl_mesh(
 ) -> Result<Row, crate::algorithms::AlgoError> {
     use crate::algorithms::fl_mesh;
     let t = std::time::Instant::now();
-    let (work, patches) = fl_mesh::choose_patches(mesh, params.patches)?;
-    let (out, report) = fl_mesh::solve(&work, params, &crate::algorithms::Silent::default())?;
+    let done = fl_mesh::run(mesh, params, &crate::algorithms::Silent::default())?;
     let seconds = t.elapsed().as_secs_f64();
-    let measures = measure(&work, &out);
-    let stop_reason = match patches.source.as_str() {
-        "uv" => format!("{} texture islands; {}", patches.count, report.stop_reason),
-        _ => report.stop_reason,
+    let summary = done.summary;
+    let out = done.mesh.unwrap_or_else(|| mesh.clone());
+    let (solved, stop_reason) = match summary.patches.source.as_str() {
+        "uv" => (
+            fl_mesh::choose_patches(mesh, fl_mesh::Patches::Uv)?.0,
+            format!(
+                "{} texture islands; {}",
+                summary.patches.count, summary.report.stop_reason
+            ),
+        ),
+        _ => (mesh.clone(), summary.report.stop_reason),
     };
+    let measures = measure(&solved, &out);
     Ok(Row {
         name: name.into(),
         faces: mesh.num_faces(),
-        iterations: report.iterations,
+        iterations: summary.report.iterations,
         converged: measures.varpi_out <= params.tolerance,
         stop_reason,
         measures,

@@ -315,7 +315,7 @@ fn run(
     }
     // Seams the file did not name change what "flattenable" means for this output: say so.
     if let flatmesh::jobs::Figures::FlMesh(s) = &outcome.figures {
-        if s.patches.source == "uv" {
+        if s.patches.source == "uv" || s.patches.uv_seam_edges > 0 {
             eprintln!("flatmesh: patches: {}", s.patches.reason);
         }
     }

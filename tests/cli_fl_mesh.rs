@@ -189,7 +189,17 @@ fn run_fl_mesh_takes_a_garments_texture_islands_as_its_panels() {
     // Held vertices (boundary, seams, the opened slits) are where they were; the copies that
     // open a slit sit on an input vertex.
     let opened = rep["job"]["patches"]["opened_vertices"].as_u64().unwrap() as usize;
-    assert!(opened > 0, "the t-shirt's front is slit from its hem");
+    assert!(opened > 0, "the t-shirt's sleeves are slit");
+    // Opening cracks nothing else: the free boundary grows by the slits' two sides only
+    // (a slit = a cut edge that is no seam of the output).
+    let free = |m: &Mesh| {
+        m.conn()
+            .edge_faces()
+            .iter()
+            .filter(|f| f[1] == flatmesh::mesh::NONE)
+            .count()
+    };
+    assert_eq!(free(&out), free(&inp) + 2 * (cut.len() - seams.len()));
     assert!(out.num_vertices() >= inp.num_vertices() + opened);
     for v in 0..inp.num_vertices() + opened {
         if !out.conn().is_interior(v as u32) {

@@ -266,8 +266,11 @@ pub enum Patches {
 }
 
 /// More islands than this look like a texture atlas rather than a sewing pattern (the real
-/// garments and shoes have 3–45), so `patches=auto` keeps the file's patches.
+/// garments and shoes have 3–23), so `patches=auto` keeps the file's patches.
 pub const MAX_AUTO_ISLANDS: usize = 256;
+/// Nor does a layout whose islands average fewer faces than this (one island per face holds
+/// every vertex: nothing would be solved); the real ones average 150 and more.
+pub const MIN_AUTO_ISLAND_FACES: usize = 16;
 
 /// When to start from the developable cone over a disk's boundary (`cone` module).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize)]
@@ -650,41 +653,56 @@ pub fn run(
     params.check()?;
     let (work, mut patches) = choose_patches(mesh, params.patches)?;
     let (mut out, mut report) = solve(&work, params, control)?;
-    // Islands chosen by `auto` that do not all become flattenable: the file's patches are
-    // tried too, and taken when they do (mh_fedora, unseen: its crown and brim stall at
-    // 1.3e-2 by islands, whole it converges on the developable cone over its rim).
-    if !report.converged && patches.source == "uv" && params.patches == Patches::Auto {
-        let (whole, whole_report) = solve(
-            mesh,
-            params,
-            &Renamed::before(control, "file patches".into()),
-        )?;
-        let islands_max = report.max_flattenability;
-        if whole_report.converged {
-            patches = PatchesUsed {
-                source: "file".into(),
-                count: mesh.num_patches(),
-                reason: format!(
-                    "by its {} texture islands it stalled at ϖ_max {islands_max:.2e}; by the \
-                     file's {} patch(es) it became flattenable",
-                    patches.count,
-                    mesh.num_patches()
-                ),
-                opened_vertices: 0,
-                ..patches
-            };
-            out = whole;
-            report = chain(report, whole_report, |a, b| {
-                format!("by the texture islands: {a}; by the file's patches: {b}")
-            });
-        } else {
-            absorb(&mut report, &whole_report);
-            patches.reason = format!(
-                "{}; the file's {} patch(es) did not become flattenable either (ϖ_max {:.2e})",
-                patches.reason,
-                mesh.num_patches(),
-                whole_report.max_flattenability
-            );
+    // Islands chosen by `auto` that stalled (a retry's rule: not a run cut short by
+    // max_iterations, whose stop reason is that word, nor one asked for without retries):
+    // the file's patches are tried too, with a budget of their own, and taken when they
+    // become flattenable (mh_fedora, unseen: its crown and brim stall at 1.3e-2 by islands,
+    // whole it converges on the developable cone over its rim). A failed or stopped second
+    // run keeps the islands' result.
+    let stalled = !report.converged
+        && params.retry
+        && params.until == Until::Flattenable
+        && !report.stop_reason.starts_with("max_iterations");
+    if stalled && patches.source == "uv" && params.patches == Patches::Auto {
+        let label = Renamed::before(control, "file patches".into());
+        match solve(mesh, params, &label) {
+            Ok((whole, whole_report)) if whole_report.converged => {
+                patches = PatchesUsed {
+                    source: "file".into(),
+                    count: mesh.num_patches(),
+                    reason: format!(
+                        "by its {} texture islands it stalled at ϖ_max {:.2e}; by the file's \
+                         {} patch(es) it became flattenable",
+                        patches.count,
+                        report.max_flattenability,
+                        mesh.num_patches()
+                    ),
+                    opened_vertices: 0,
+                    ..patches
+                };
+                out = whole;
+                report = chain(report, whole_report, |a, b| {
+                    format!("by the texture islands: {a}; by the file's patches: {b}")
+                });
+            }
+            Ok((_, whole_report)) => {
+                absorb(&mut report, &whole_report);
+                let not = format!(
+                    "the file's {} patch(es) did not become flattenable either (ϖ_max {:.2e}, \
+                     {} iterations)",
+                    mesh.num_patches(),
+                    whole_report.max_flattenability,
+                    whole_report.iterations
+                );
+                report.stop_reason = format!("{}; {not}", report.stop_reason);
+                patches.reason = format!("{}; {not}", patches.reason);
+            }
+            Err(e) => {
+                patches.reason = format!(
+                    "{}; the file's patches were not tried ({e})",
+                    patches.reason
+                );
+            }
         }
     }
     let hausdorff_to_input = super::Distance::hausdorff(&out, mesh);
@@ -705,9 +723,11 @@ pub fn run(
 /// a garment with sleeves or legs must push the curvature of its armpits and crotch into its
 /// fixed openings (Gauss–Bonnet), and converges, if at all, by creasing all over (issue 12
 /// note of 2026-11-27: diffavatar_tshirt whole 7.2 s, hd 8.6 %, 868 new creases; by its four
-/// islands 0.5 s, hd 2.1 %; mh_female_elegantsuit01 stalls whole at 2.9e-3 and converges by
+/// islands 0.4 s, hd 2.0 %; mh_female_elegantsuit01 stalls whole at 2.9e-3 and converges by
 /// its islands in 0.6 s). `auto` takes the islands when the layout cuts the file's patches
-/// and has at most [`MAX_AUTO_ISLANDS`] islands; `uv` requires a layout.
+/// and has at most [`MAX_AUTO_ISLANDS`] islands of [`MIN_AUTO_ISLAND_FACES`] faces or more on
+/// average; `uv` requires a layout. ([`run`] also falls back to the file's patches when the
+/// islands stall.)
 pub fn choose_patches(mesh: &Mesh, wanted: Patches) -> Result<(Mesh, PatchesUsed), AlgoError> {
     use crate::mesh::islands;
     let file = |reason: String, seams: usize| {
@@ -743,12 +763,17 @@ pub fn choose_patches(mesh: &Mesh, wanted: Patches) -> Result<(Mesh, PatchesUsed
                 0,
             ));
         }
-        if found.count() > MAX_AUTO_ISLANDS {
+        if found.count() > MAX_AUTO_ISLANDS
+            || found.count() * MIN_AUTO_ISLAND_FACES > mesh.num_faces()
+        {
             return Ok(file(
                 format!(
-                    "its texture layout has {} islands, more than the {MAX_AUTO_ISLANDS} of \
-                     a sewing pattern (patches=uv takes them anyway)",
-                    found.count()
+                    "its texture layout has {} islands for {} faces: more than the \
+                     {MAX_AUTO_ISLANDS} of a sewing pattern, or fewer than \
+                     {MIN_AUTO_ISLAND_FACES} faces each on average (patches=uv takes them \
+                     anyway)",
+                    found.count(),
+                    mesh.num_faces()
                 ),
                 seams,
             ));
@@ -3666,25 +3691,26 @@ pub fn refine_sqrt3(mesh: &Mesh, vertices: &[u32]) -> RawMesh {
 mod tests {
     use super::*;
 
-    /// A flat 4×1 strip of squares, its layout cut (when `cut`) between the second and third.
+    /// A flat 16×1 strip of squares, its layout cut (when `cut`) between the 8th and 9th: two
+    /// islands of 16 faces, as many as `auto` asks of an island on average.
     fn strip_with_layout(cut: bool) -> Mesh {
-        let positions: Vec<[f64; 3]> = (0..5)
+        let positions: Vec<[f64; 3]> = (0..17)
             .flat_map(|i| [[i as f64, 0.0, 0.0], [i as f64, 1.0, 0.0]])
             .collect();
         let mut triangles = Vec::new();
-        for i in 0..4u32 {
+        for i in 0..16u32 {
             triangles.push([2 * i, 2 * i + 2, 2 * i + 3]);
             triangles.push([2 * i, 2 * i + 3, 2 * i + 1]);
         }
         let mut coords: Vec<[f64; 2]> = positions.iter().map(|p| [p[0], p[1]]).collect();
-        coords.extend([[2.5, 0.0], [2.5, 1.0]]);
+        coords.extend([[8.5, 0.0], [8.5, 1.0]]);
         let uv = triangles
             .iter()
             .enumerate()
             .map(|(f, t)| {
                 t.map(|v| {
-                    if cut && f >= 4 && (4..=5).contains(&v) {
-                        v + 6
+                    if cut && f >= 16 && (16..=17).contains(&v) {
+                        v + 18
                     } else {
                         v
                     }
@@ -3716,7 +3742,7 @@ mod tests {
         assert_eq!(m.num_patches(), 2);
         let (m, used) = choose_patches(&cut, Patches::File).expect("chosen");
         assert_eq!((used.source.as_str(), m.num_patches()), ("file", 1));
-        // An uncut layout leaves the file's patches, even when asked for.
+        // An uncut layout: auto keeps the file's patches; uv makes its one island.
         let whole = strip_with_layout(false);
         let (_, used) = choose_patches(&whole, Patches::Auto).expect("chosen");
         assert_eq!(used.source, "file");

@@ -163,9 +163,11 @@ impl Kind {
                  unconverged result, when that lowers the max flattenability; a collapsed \
                  vertex stays in the output unreferenced; not with until=stationary), \
                  patches=auto|file|uv (auto: the islands of the file's texture layout are the \
-                 patches when they cut the file's into at most 256, else the file's o/g \
-                 groups or glTF primitives; each patch is made flattenable on its own, its \
-                 seams held)"
+                 patches when they cut the file's into at most 256 of 16 faces or more on \
+                 average, and the file's o/g groups or glTF primitives when those islands \
+                 stall and the file's become flattenable; each patch is made flattenable on \
+                 its own, its seams held; a cut inside an island is opened by appending \
+                 copies of its vertices)"
             }
             Kind::Subdivide => {
                 "levels (1; or --levels), curves (or --curves), split_ratio (0.5), \

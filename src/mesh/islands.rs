@@ -100,11 +100,13 @@ pub struct IslandMesh {
 
 /// `mesh` with one patch per island, named `island<k>`, or `<patch>.island<k>` when the file
 /// named its patches (k from 1, largest first), and every cut that ends inside an island (a
-/// slit: a sleeve's or a trouser leg's seam, which closes the island into a tube) opened: a
-/// vertex that has several texture coordinates within one island keeps its index for the
-/// first face that names it and gets a copy, appended, for each other coordinate. The copies
-/// sit where the vertex is and lie on the opened cut, so they are held like any boundary
-/// vertex. Positions, faces and texture coordinates are otherwise kept.
+/// slit: a sleeve's or a trouser leg's seam, which closes the island into a tube) opened. The
+/// corners of a vertex are grouped by the faces around it that share an edge, across any edge
+/// but a slit's (so across the seam to the next island too); each group after the first gets
+/// a copy of the vertex, appended. So a slit's tip and its end on a seam keep one vertex, and
+/// the seam stays welded. The copies sit where the vertex is and lie on the opened cut, so
+/// they are held like any boundary vertex. Positions, faces and texture coordinates are
+/// otherwise kept.
 pub fn with_island_patches(mesh: &Mesh, islands: &UvIslands) -> Result<IslandMesh, MeshError> {
     let names = mesh.patch_names();
     let unnamed = names.len() == 1 && names[0] == "default";
@@ -122,33 +124,73 @@ pub fn with_island_patches(mesh: &Mesh, islands: &UvIslands) -> Result<IslandMes
         .collect();
     let mut raw = mesh.to_raw();
     if let Some(uv) = mesh.uv() {
-        let mut first: HashMap<(u32, u32), [u64; 2]> = HashMap::new();
-        let mut copies: HashMap<(u32, u32, [u64; 2]), u32> = HashMap::new();
-        for (f, t) in raw.triangles.iter_mut().enumerate() {
-            let island = islands.face_island[f];
-            for (k, v) in t.iter_mut().enumerate() {
-                let Some(c) = uv.coords.get(uv.triangles[f][k] as usize) else {
-                    continue;
-                };
-                let c = [c[0].to_bits(), c[1].to_bits()];
-                let seen = *first.entry((*v, island)).or_insert(c);
-                if seen != c {
-                    let positions = &mut raw.positions;
-                    *v = *copies.entry((*v, island, c)).or_insert_with(|| {
-                        positions.push(positions[*v as usize]);
-                        (positions.len() - 1) as u32
-                    });
-                }
-            }
-        }
+        open_slits(mesh, uv, islands, &mut raw);
     }
-    let opened = raw.positions.len() - mesh.num_vertices();
-    let (mesh, _) = Mesh::new(RawMesh {
+    let (cut, _) = Mesh::new(RawMesh {
         face_patch: islands.face_island.clone(),
         patch_names,
         ..raw
     })?;
-    Ok(IslandMesh { mesh, opened })
+    // Counted on the result: a repair on the way in (a bow tie) would split vertices too.
+    let opened = cut.num_vertices() - mesh.num_vertices();
+    Ok(IslandMesh { mesh: cut, opened })
+}
+
+/// Split the vertices of the slits of `raw` (a copy of `mesh`'s data) in place: corners
+/// (3·face + k) are joined across every shared edge but a slit's, and each vertex keeps its
+/// index for the group of its first corner.
+fn open_slits(mesh: &Mesh, uv: &super::UvLayer, islands: &UvIslands, raw: &mut RawMesh) {
+    let tris = mesh.triangles();
+    let mut parent: Vec<u32> = (0..3 * tris.len() as u32).collect();
+    fn find(p: &mut [u32], mut x: u32) -> u32 {
+        while p[x as usize] != x {
+            p[x as usize] = p[p[x as usize] as usize];
+            x = p[x as usize];
+        }
+        x
+    }
+    let corner = |f: usize, v: u32| tris[f].iter().position(|&x| x == v).map(|k| 3 * f + k);
+    let coord = |c: usize| {
+        let t = uv.triangles[c / 3][c % 3] as usize;
+        uv.coords.get(t).map(|q| [q[0].to_bits(), q[1].to_bits()])
+    };
+    let conn = mesh.conn();
+    for (e, &[f, g]) in conn.edge_faces().iter().enumerate() {
+        if g == NONE {
+            continue;
+        }
+        let (f, g) = (f as usize, g as usize);
+        let ends = conn.edges()[e].map(|v| (corner(f, v), corner(g, v)));
+        let pairs: Vec<(usize, usize)> = ends.iter().filter_map(|&(a, b)| Some((a?, b?))).collect();
+        if pairs.len() != 2 {
+            continue;
+        }
+        let slit = islands.face_island[f] == islands.face_island[g]
+            && pairs.iter().any(|&(a, b)| coord(a) != coord(b));
+        if slit {
+            continue;
+        }
+        for (a, b) in pairs {
+            let (ra, rb) = (find(&mut parent, a as u32), find(&mut parent, b as u32));
+            parent[ra.max(rb) as usize] = ra.min(rb);
+        }
+    }
+    // The group each vertex keeps, then a copy per further group.
+    let mut kept: HashMap<u32, u32> = HashMap::new();
+    let mut copies: HashMap<u32, u32> = HashMap::new();
+    for c in 0..3 * tris.len() {
+        let v = tris[c / 3][c % 3];
+        let root = find(&mut parent, c as u32);
+        if *kept.entry(v).or_insert(root) == root {
+            continue;
+        }
+        let positions = &mut raw.positions;
+        let copy = *copies.entry(root).or_insert_with(|| {
+            positions.push(positions[v as usize]);
+            (positions.len() - 1) as u32
+        });
+        raw.triangles[c / 3][c % 3] = copy;
+    }
 }
 
 #[cfg(test)]
@@ -267,6 +309,82 @@ mod tests {
         );
         assert_eq!(p.conn().boundary_loops().len(), 1);
         assert_eq!(p.conn().boundary_loops()[0].len(), 10);
+    }
+
+    /// A tube of two rings of six squares, each ring its own island laid out flat by a slit
+    /// along one generator: the bottom ring's at i = 0, the top ring's at i = 3, each from its
+    /// free rim to the seam between the rings. Each slit copies its rim vertex only; where it
+    /// ends on the seam the vertex stays one, and every seam edge still joins both rings.
+    #[test]
+    fn a_slit_that_ends_on_a_seam_leaves_the_seam_welded() {
+        let n = 6u32;
+        let positions: Vec<[f64; 3]> = (0..3 * n)
+            .map(|v| {
+                let a = std::f64::consts::TAU * (v % n) as f64 / n as f64;
+                [a.cos(), a.sin(), (v / n) as f64]
+            })
+            .collect();
+        let (mut triangles, mut uv_tris) = (Vec::new(), Vec::new());
+        let mut coords: Vec<[f64; 2]> = Vec::new();
+        let mut coord = |u: u32, v: f64| {
+            let q = [u as f64, v];
+            coords.iter().position(|&c| c == q).unwrap_or_else(|| {
+                coords.push(q);
+                coords.len() - 1
+            }) as u32
+        };
+        for j in 0..2 {
+            // The ring's slit column: its layout runs from the slit round to it again.
+            let slit = if j == 0 { 0 } else { 3 };
+            for i in 0..n {
+                let (i1, jv) = ((i + 1) % n, j as f64 + 10.0 * j as f64);
+                let u0 = (i + n - slit) % n;
+                let u1 = if i1 == slit { n } else { (i1 + n - slit) % n };
+                let (a, b, c, d) = (j * n + i, j * n + i1, (j + 1) * n + i1, (j + 1) * n + i);
+                let (ta, tb) = (coord(u0, jv), coord(u1, jv));
+                let (tc, td) = (coord(u1, jv + 1.0), coord(u0, jv + 1.0));
+                triangles.push([a, b, c]);
+                uv_tris.push([ta, tb, tc]);
+                triangles.push([a, c, d]);
+                uv_tris.push([ta, tc, td]);
+            }
+        }
+        let m = Mesh::new(RawMesh {
+            positions,
+            face_patch: vec![0; triangles.len()],
+            triangles,
+            patch_names: vec!["default".into()],
+            uv: Some(UvLayer {
+                coords,
+                triangles: uv_tris,
+            }),
+        })
+        .expect("valid")
+        .0;
+        let is = uv_islands(&m).expect("has uv");
+        // The seam between the rings (6 edges) and the two slits.
+        assert_eq!((is.count(), is.seam_edges), (2, 8));
+        let cut = with_island_patches(&m, &is).expect("valid");
+        assert_eq!(cut.opened, 2);
+        let p = cut.mesh;
+        // The copies: of the bottom rim's vertex 0 and the top rim's vertex 15.
+        let mut copied: Vec<[f64; 3]> = p.positions()[18..].to_vec();
+        copied.sort_by(|a, b| a[2].total_cmp(&b[2]));
+        assert_eq!(copied, [p.positions()[0], p.positions()[15]]);
+        let conn = p.conn();
+        for i in 0..n {
+            let pair = [n + i, n + (i + 1) % n];
+            let pair = [pair[0].min(pair[1]), pair[0].max(pair[1])];
+            let e = conn.edges().iter().position(|&x| x == pair).expect("edge");
+            assert_ne!(
+                conn.edge_faces()[e][1],
+                NONE,
+                "seam edge {pair:?} came apart"
+            );
+        }
+        // Free boundary: both rims and the two sides of each slit.
+        let free = conn.edge_faces().iter().filter(|f| f[1] == NONE).count();
+        assert_eq!(free, 6 + 6 + 2 * 2);
     }
 
     #[test]
