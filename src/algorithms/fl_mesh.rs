@@ -723,7 +723,7 @@ pub fn run(
 /// a garment with sleeves or legs must push the curvature of its armpits and crotch into its
 /// fixed openings (Gauss–Bonnet), and converges, if at all, by creasing all over (issue 12
 /// note of 2026-11-27: diffavatar_tshirt whole 7.2 s, hd 8.6 %, 868 new creases; by its four
-/// islands 0.4 s, hd 2.0 %; mh_female_elegantsuit01 stalls whole at 2.9e-3 and converges by
+/// islands 0.4 s, hd 2.1 %; mh_female_elegantsuit01 stalls whole at 2.9e-3 and converges by
 /// its islands in 0.6 s). `auto` takes the islands when the layout cuts the file's patches
 /// and has at most [`MAX_AUTO_ISLANDS`] islands of [`MIN_AUTO_ISLAND_FACES`] faces or more on
 /// average; `uv` requires a layout. ([`run`] also falls back to the file's patches when the

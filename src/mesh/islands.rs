@@ -198,6 +198,26 @@ mod tests {
     use super::*;
     use crate::mesh::UvLayer;
 
+    /// A one-patch mesh with a texture layout.
+    fn with_layout(
+        positions: Vec<[f64; 3]>,
+        triangles: Vec<[u32; 3]>,
+        coords: Vec<[f64; 2]>,
+        uv_tris: Vec<[u32; 3]>,
+    ) -> Mesh {
+        let raw = RawMesh {
+            positions,
+            face_patch: vec![0; triangles.len()],
+            triangles,
+            patch_names: vec!["default".into()],
+            uv: Some(UvLayer {
+                coords,
+                triangles: uv_tris,
+            }),
+        };
+        Mesh::new(raw).expect("valid").0
+    }
+
     /// A strip of four squares (two triangles each) along x, welded, whose texture layout is
     /// cut between the second and third square: two islands of four faces, one seam edge.
     fn strip(cut: bool) -> Mesh {
@@ -229,17 +249,7 @@ mod tests {
                 })
             })
             .collect();
-        let raw = RawMesh {
-            positions,
-            face_patch: vec![0; triangles.len()],
-            triangles,
-            patch_names: vec!["default".into()],
-            uv: Some(UvLayer {
-                coords,
-                triangles: uv_tris,
-            }),
-        };
-        Mesh::new(raw).expect("valid").0
+        with_layout(positions, triangles, coords, uv_tris)
     }
 
     #[test]
@@ -283,18 +293,7 @@ mod tests {
             .enumerate()
             .map(|(f, t)| t.map(|v| if v == 1 && (f == 2 || f == 3) { 9 } else { v }))
             .collect();
-        let m = Mesh::new(RawMesh {
-            positions,
-            face_patch: vec![0; 8],
-            triangles,
-            patch_names: vec!["default".into()],
-            uv: Some(UvLayer {
-                coords,
-                triangles: uv_tris,
-            }),
-        })
-        .expect("valid")
-        .0;
+        let m = with_layout(positions, triangles, coords, uv_tris);
         assert!(m.conn().is_interior(4));
         let is = uv_islands(&m).expect("has uv");
         assert_eq!((is.count(), is.seam_edges), (1, 1));
@@ -349,18 +348,7 @@ mod tests {
                 uv_tris.push([ta, tc, td]);
             }
         }
-        let m = Mesh::new(RawMesh {
-            positions,
-            face_patch: vec![0; triangles.len()],
-            triangles,
-            patch_names: vec!["default".into()],
-            uv: Some(UvLayer {
-                coords,
-                triangles: uv_tris,
-            }),
-        })
-        .expect("valid")
-        .0;
+        let m = with_layout(positions, triangles, coords, uv_tris);
         let is = uv_islands(&m).expect("has uv");
         // The seam between the rings (6 edges) and the two slits.
         assert_eq!((is.count(), is.seam_edges), (2, 8));
