@@ -167,7 +167,11 @@ impl Kind {
                  average, and the file's o/g groups or glTF primitives when those islands \
                  stall and the file's become flattenable; each patch is made flattenable on \
                  its own, its seams held; a cut inside an island is opened by appending \
-                 copies of its vertices)"
+                 copies of its vertices), seams=auto|held|free (auto: held, and when the \
+                 islands of a one-patch file stall they are solved again with their seams \
+                 free, kept if that converges or lowers the max flattenability; free: the \
+                 seams between patches move with the surface, welded, and only the boundary \
+                 is held)"
             }
             Kind::Subdivide => {
                 "levels (1; or --levels), curves (or --curves), split_ratio (0.5), \
