@@ -7,7 +7,9 @@
 //! `seams = free` makes the seam vertices unknowns too, without a constraint of their own:
 //! their rows in Eq. 7 keep θ at 2π, ∂θ at 0 and a (2,2) entry of −1, so λ = 0 there and
 //! they move only through the fairness and closeness terms and the constraints of the
-//! interior vertices around them; the patches stay welded (see [`Seams`], [`run`]). Each iteration
+//! interior vertices around them; the patches stay welded. A sewn cut's vertices (a slit
+//! opened by `patches = uv`) share one row, their rings make its J_fair, and each trial puts
+//! them where it puts that row's vertex, so the cut stays closed (see [`Seams`], [`run`]). Each iteration
 //! assembles Eq. 7 with H of Eq. 10 (w1 = 1, w2 = 0.1 by default), B_p of Eq. 8, B_λ of Eq. 9
 //! and Λ = ∂θ/∂v of Eq. 11 from Propositions 1 and 2, factors it (faer's sparse LDLᵀ of the
 //! quasi-definite system by default, or its sparse LU; the symbolic factorisation is computed
@@ -280,8 +282,10 @@ pub enum Seams {
     /// Held where they are, bit-identical (the paper's fixed boundary curves).
     Held,
     /// They move with the surface, welded (G0), with no constraint of their own: a seam
-    /// vertex is on every one of its patches' boundaries, where ϖ is not defined. Only the
-    /// free boundary is held.
+    /// vertex is on every one of its patches' boundaries, where ϖ is not defined. So do sewn
+    /// cuts: boundary vertices at one position whose boundary edges all have a twin joining
+    /// the same positions (a slit `patches = uv` opened, its tip and its end on a seam) move
+    /// as one vertex. Only the free boundary is held.
     Free,
 }
 
@@ -2359,6 +2363,56 @@ fn solve_phase(
     Ok((current, report))
 }
 
+/// With `seams = free`: the boundary vertices of sewn cuts, grouped by position, each group
+/// one unknown. A boundary edge is sewn when another boundary edge joins the same two
+/// positions, and a boundary vertex is on a sewn cut when all its boundary edges are: the two
+/// sides of a slit that `patches = uv` opened (its copies sit bit for bit where their vertex
+/// is), its tip and its end on a seam, or a file's seam left unwelded. A group with a vertex
+/// on the free boundary stays held. Sorted, so rows do not depend on hashing.
+fn sewn_cuts(mesh: &Mesh) -> Vec<Vec<u32>> {
+    use std::collections::HashMap;
+    let conn = mesh.conn();
+    let key = |v: u32| mesh.position(v).map(f64::to_bits);
+    let edge_key = |e: &[u32; 2]| {
+        let (a, b) = (key(e[0]), key(e[1]));
+        if a <= b {
+            (a, b)
+        } else {
+            (b, a)
+        }
+    };
+    let open: Vec<&[u32; 2]> = conn
+        .edges()
+        .iter()
+        .zip(conn.edge_faces())
+        .filter(|(_, f)| f[1] == NONE)
+        .map(|(e, _)| e)
+        .collect();
+    let mut count: HashMap<_, usize> = HashMap::new();
+    for e in &open {
+        *count.entry(edge_key(e)).or_default() += 1;
+    }
+    let nv = mesh.num_vertices();
+    let (mut on_cut, mut held) = (vec![false; nv], vec![false; nv]);
+    for e in &open {
+        let sewn = count[&edge_key(e)] >= 2;
+        for &v in e.iter() {
+            on_cut[v as usize] = true;
+            held[v as usize] |= !sewn;
+        }
+    }
+    let mut groups: HashMap<[u64; 3], Vec<u32>> = HashMap::new();
+    for v in (0..nv as u32).filter(|&v| on_cut[v as usize]) {
+        groups.entry(key(v)).or_default().push(v);
+    }
+    let mut out: Vec<Vec<u32>> = groups
+        .into_values()
+        .filter(|g| g.iter().all(|&v| !held[v as usize]))
+        .collect();
+    out.sort_unstable();
+    out
+}
+
 /// ϖ_max of `mesh` measured by `geometry`, and its interior vertices above `tolerance`, worst
 /// first.
 fn verdict(mesh: &Mesh, tolerance: f64) -> (f64, Vec<u32>) {
@@ -2448,6 +2502,12 @@ struct System<'a> {
     free: Vec<u32>,
     nc: usize,
     n: usize,
+    /// With `seams = free`, the vertices of a sewn cut that follow another: (vertex, the
+    /// vertex whose row moves it).
+    ties: Vec<(u32, u32)>,
+    /// Per row, the neighbours whose mean J_fair pulls towards (`b_p`).
+    fair_start: Vec<usize>,
+    fair_ring: Vec<u32>,
     /// Unknowns: x, y, z, λ per free vertex (4n), and with an obstacle one body multiplier
     /// each (5n; row 4n + r, see `contact`).
     dim: usize,
@@ -2566,28 +2626,53 @@ impl<'a> System<'a> {
                 }
             }
         }
+        let mut ties = Vec::new();
+        if params.seams == Seams::Free {
+            for group in sewn_cuts(mesh) {
+                row[group[0] as usize] = free.len() as u32;
+                free.push(group[0]);
+                for &m in &group[1..] {
+                    row[m as usize] = row[group[0] as usize];
+                    ties.push((m, group[0]));
+                }
+            }
+        }
         let n = free.len();
+        // The neighbours J_fair averages per row: a vertex's ring, a sewn cut's rings together.
+        let mut fair_start = vec![0usize];
+        let mut fair_ring: Vec<u32> = Vec::new();
+        {
+            let mut tied: Vec<Vec<u32>> = vec![Vec::new(); n];
+            for &(m, rep) in &ties {
+                tied[row[rep as usize] as usize].push(m);
+            }
+            for (r, &v) in free.iter().enumerate() {
+                for &m in std::iter::once(&v).chain(&tied[r]) {
+                    fair_ring.extend_from_slice(conn.ring_of(m));
+                }
+                fair_start.push(fair_ring.len());
+            }
+        }
+        let fair_len = |r: usize| (fair_start[r + 1] - fair_start[r]) as f64;
         let mut entries: Vec<(usize, usize)> = Vec::new();
         let mut values: Vec<f64> = Vec::new();
         // H ⊗ I3 (Eq. 10): constant but for the stiffening of folding regions.
         let mut h_pairs: Vec<(u32, u32)> = Vec::new();
-        for (r, &v) in free.iter().enumerate() {
-            let ring = conn.ring_of(v);
-            let di = ring.len() as f64;
+        for r in 0..n {
+            let ring = &fair_ring[fair_start[r]..fair_start[r + 1]];
+            let di = fair_len(r);
             for c in 0..3 {
                 entries.push((c * n + r, c * n + r));
                 values.push(params.w1 + params.w2);
                 h_pairs.push((r as u32, r as u32));
                 for &p in ring {
                     let j = row[p as usize];
-                    if j != NONE {
+                    if j != NONE && j as usize != r {
                         h_pairs.push((r as u32, j));
                         entries.push((c * n + r, c * n + j as usize));
                         values.push(match params.linear_solver {
                             LinearSolver::Lu => -params.w1 / di,
-                            LinearSolver::Ldlt => {
-                                -params.w1 / (di * conn.ring_of(p).len() as f64).sqrt()
-                            }
+                            LinearSolver::Ldlt => -params.w1 / (di * fair_len(j as usize)).sqrt(),
                         });
                     }
                 }
@@ -2673,6 +2758,9 @@ impl<'a> System<'a> {
             free,
             nc,
             n,
+            ties,
+            fair_start,
+            fair_ring,
             slot_start,
             slot_vertex,
             slot_col,
@@ -2850,7 +2938,7 @@ impl<'a> System<'a> {
             if let Some(ct) = &mut self.contact {
                 ct.choose(&self.pos, CONTACT_BAND * self.h);
             }
-            self.assemble(conn, anchors, params, mu);
+            self.assemble(anchors, params, mu);
             let mut solved = self
                 .lu
                 .factor(&self.values)
@@ -2860,7 +2948,7 @@ impl<'a> System<'a> {
                 if solved.is_err() || !self.revise_contact(fair) {
                     break;
                 }
-                self.assemble(conn, anchors, params, mu);
+                self.assemble(anchors, params, mu);
                 solved = self
                     .lu
                     .factor(&self.values)
@@ -2890,7 +2978,7 @@ impl<'a> System<'a> {
             }
             step_norm /= h;
             tan_norm /= h;
-            self.stationarity = self.force_residual_max(conn, anchors, &lambda, params, false);
+            self.stationarity = self.force_residual_max(anchors, &lambda, params, false);
             let (alpha, corrections) = match params.step_rule {
                 StepRule::Fixed => {
                     for r in 0..n {
@@ -3066,13 +3154,7 @@ impl<'a> System<'a> {
     /// Fill Λ (Eq. 11–13, scaled by h̄ so that every block is O(1)), the two right-hand sides
     /// (normal [0; h̄·B_λ] of Eq. 9 and tangential [B_p; 0] of Eq. 8: Eq. 7 is linear in B, so
     /// their solutions add up to the paper's δ) and the (2,2) block −μ I.
-    fn assemble(
-        &mut self,
-        conn: &crate::mesh::Connectivity,
-        anchors: &[[f64; 3]],
-        params: &Params,
-        mu: f64,
-    ) {
+    fn assemble(&mut self, anchors: &[[f64; 3]], params: &Params, mu: f64) {
         let n = self.n;
         let h = self.h;
         for r in 0..n {
@@ -3091,7 +3173,8 @@ impl<'a> System<'a> {
         }
         let dim = self.dim;
         for (r, &v) in self.free.iter().enumerate() {
-            let b = b_p(&self.pos, anchors, conn.ring_of(v), v, params);
+            let ring = &self.fair_ring[self.fair_start[r]..self.fair_start[r + 1]];
+            let b = b_p(&self.pos, anchors, ring, v, params);
             for c in 0..3 {
                 self.rhs[c * n + r] = 0.0;
                 self.rhs[dim + c * n + r] = b[c];
@@ -3385,6 +3468,9 @@ impl<'a> System<'a> {
                 p[c] += alpha * delta[r][c];
             }
         }
+        for &(m, rep) in &self.ties {
+            self.trial_pos[m as usize] = self.trial_pos[rep as usize];
+        }
         eval(
             &self.trial_pos,
             tris,
@@ -3457,13 +3543,12 @@ impl<'a> System<'a> {
 
     fn force_residual_max(
         &mut self,
-        conn: &crate::mesh::Connectivity,
         anchors: &[[f64; 3]],
         lambda: &[f64],
         params: &Params,
         trial: bool,
     ) -> f64 {
-        self.fill_force(conn, anchors, lambda, params, trial);
+        self.fill_force(anchors, lambda, params, trial);
         self.force
             .iter()
             .map(|f| dot(*f, *f).sqrt())
@@ -3472,21 +3557,15 @@ impl<'a> System<'a> {
     }
 
     /// force_r = B_p(v_r) − (Λᵀλ)_r.
-    fn fill_force(
-        &mut self,
-        conn: &crate::mesh::Connectivity,
-        anchors: &[[f64; 3]],
-        lambda: &[f64],
-        params: &Params,
-        trial: bool,
-    ) {
+    fn fill_force(&mut self, anchors: &[[f64; 3]], lambda: &[f64], params: &Params, trial: bool) {
         let (pos, grad) = if trial {
             (&self.trial_pos, &self.trial_grad)
         } else {
             (&self.pos, &self.grad)
         };
         for (r, &v) in self.free.iter().enumerate() {
-            self.force[r] = b_p(pos, anchors, conn.ring_of(v), v, params);
+            let ring = &self.fair_ring[self.fair_start[r]..self.fair_start[r + 1]];
+            self.force[r] = b_p(pos, anchors, ring, v, params);
         }
         for r in 0..self.n {
             let l = lambda[r];
@@ -3951,6 +4030,92 @@ mod tests {
             assert_eq!(seam_moved, moved, "{seams:?}");
             // Welded: the two patches still share every seam vertex.
             assert_eq!(out.triangles(), mesh.triangles());
+        }
+    }
+
+    /// A flat 9 × 9 grid of one patch slit along x = 4 from its edge y = 0 to its centre (the
+    /// slit's vertices below the tip copied for the faces right of it, as `patches = uv`
+    /// opens a sleeve's seam), the slit bent out of the plane.
+    fn grid_with_bent_slit() -> Mesh {
+        let z = |y: f64| 0.4 * (PI * y / 4.0).sin();
+        let mut positions: Vec<[f64; 3]> = (0..81)
+            .map(|i| {
+                let (x, y) = ((i % 9) as f64, (i / 9) as f64);
+                [x, y, if x == 4.0 && y < 4.0 { z(y) } else { 0.0 }]
+            })
+            .collect();
+        positions.extend((0..4).map(|y| [4.0, y as f64, z(y as f64)]));
+        let copy = |v: u32| {
+            if v % 9 == 4 && v / 9 < 4 {
+                81 + v / 9
+            } else {
+                v
+            }
+        };
+        let mut triangles = Vec::new();
+        for j in 0..8u32 {
+            for i in 0..8u32 {
+                let v = 9 * j + i;
+                let mut cell = [[v, v + 1, v + 10], [v, v + 10, v + 9]];
+                if i == 4 {
+                    cell = cell.map(|t| t.map(copy));
+                }
+                triangles.extend(cell);
+            }
+        }
+        Mesh::new(crate::mesh::RawMesh {
+            positions,
+            face_patch: vec![0; triangles.len()],
+            triangles,
+            patch_names: vec!["default".into()],
+            uv: None,
+        })
+        .expect("valid")
+        .0
+    }
+
+    #[test]
+    fn free_seams_move_a_slit_as_one_and_hold_its_end_on_the_boundary() {
+        let mesh = grid_with_bent_slit();
+        let varpi_max = |m: &Mesh| {
+            let theta = crate::geometry::angle_sums(m);
+            crate::geometry::flattenability(m, &theta)
+                .into_iter()
+                .fold(0.0, f64::max)
+        };
+        let before = varpi_max(&mesh);
+        assert!(before > 1e-2, "{before}");
+        // The slit: (4, y) and its copy 81 + y; its end on the boundary y = 0 is held.
+        let pairs: Vec<(u32, u32)> = (1..4).map(|y| (9 * y + 4, 81 + y)).collect();
+        let held: Vec<u32> = (0..85u32)
+            .filter(|&v| {
+                let p = mesh.position(v);
+                v % 9 != 4 && (p[0] == 0.0 || p[0] == 8.0 || p[1] == 0.0 || p[1] == 8.0)
+            })
+            .chain([4, 81])
+            .collect();
+        for seams in [Seams::Held, Seams::Free] {
+            let params = Params {
+                seams,
+                ..Params::default()
+            };
+            let (out, report) =
+                solve(&mesh, &params, &crate::algorithms::Silent::default()).expect("runs");
+            let after = varpi_max(&out);
+            for &v in &held {
+                assert_eq!(out.position(v), mesh.position(v), "{seams:?}: held {v}");
+            }
+            for &(a, b) in &pairs {
+                // Sewn: both sides of the slit stay one point in space.
+                assert_eq!(out.position(a), out.position(b), "{seams:?}: {a} {b}");
+                let moved = out.position(a) != mesh.position(a);
+                assert_eq!(moved, seams == Seams::Free, "{seams:?}: slit vertex {a}");
+            }
+            if seams == Seams::Free {
+                assert!(after <= 1e-6, "{after}: {}", report.stop_reason);
+            } else {
+                assert!(after <= before);
+            }
         }
     }
 
