@@ -2429,21 +2429,10 @@ fn verdict(mesh: &Mesh, tolerance: f64) -> (f64, Vec<u32>) {
 /// zero: Σ(2π − θ) = 2πχ there, so not every vertex can reach θ = 2π.
 pub(crate) fn impossible_vertices(mesh: &Mesh) -> Vec<bool> {
     let nv = mesh.num_vertices();
-    let mut parent: Vec<u32> = (0..nv as u32).collect();
-    fn find(p: &mut [u32], mut x: u32) -> u32 {
-        while p[x as usize] != x {
-            p[x as usize] = p[p[x as usize] as usize];
-            x = p[x as usize];
-        }
-        x
-    }
+    let mut sets = crate::mesh::disjoint::DisjointSets::new(nv);
     for t in mesh.triangles() {
-        for k in 0..2 {
-            let (a, b) = (find(&mut parent, t[k]), find(&mut parent, t[k + 1]));
-            if a != b {
-                parent[a.max(b) as usize] = a.min(b);
-            }
-        }
+        sets.union(t[0], t[1]);
+        sets.union(t[1], t[2]);
     }
     let mut comp_v = vec![0i64; nv];
     let mut comp_f = vec![0i64; nv];
@@ -2454,18 +2443,18 @@ pub(crate) fn impossible_vertices(mesh: &Mesh) -> Vec<bool> {
         if kinds[v as usize] == VertexKind::Unreferenced {
             continue;
         }
-        let r = find(&mut parent, v) as usize;
+        let r = sets.find(v) as usize;
         comp_v[r] += 1;
         if kinds[v as usize] != VertexKind::Interior {
             open[r] = true;
         }
     }
     for t in mesh.triangles() {
-        let r = find(&mut parent, t[0]) as usize;
+        let r = sets.find(t[0]) as usize;
         comp_f[r] += 1;
     }
     for e in mesh.conn().edges() {
-        let r = find(&mut parent, e[0]) as usize;
+        let r = sets.find(e[0]) as usize;
         comp_e[r] += 1;
     }
     (0..nv as u32)
@@ -2473,7 +2462,7 @@ pub(crate) fn impossible_vertices(mesh: &Mesh) -> Vec<bool> {
             if kinds[v as usize] == VertexKind::Unreferenced {
                 return false;
             }
-            let r = find(&mut parent, v) as usize;
+            let r = sets.find(v) as usize;
             !open[r] && comp_v[r] - comp_e[r] + comp_f[r] != 0
         })
         .collect()

@@ -525,25 +525,13 @@ impl Connectivity {
     }
     /// Number of connected components (through shared edges).
     pub fn components(&self, num_faces: usize) -> usize {
-        let mut parent: Vec<u32> = (0..num_faces as u32).collect();
-        fn find(p: &mut [u32], mut x: u32) -> u32 {
-            while p[x as usize] != x {
-                p[x as usize] = p[p[x as usize] as usize];
-                x = p[x as usize];
-            }
-            x
-        }
+        let mut sets = super::disjoint::DisjointSets::new(num_faces);
         for ef in &self.edge_faces {
             if ef[1] != NONE {
-                let (a, b) = (find(&mut parent, ef[0]), find(&mut parent, ef[1]));
-                if a != b {
-                    parent[a.max(b) as usize] = a.min(b);
-                }
+                sets.union(ef[0], ef[1]);
             }
         }
-        (0..num_faces as u32)
-            .filter(|&f| find(&mut parent, f) == f)
-            .count()
+        (0..num_faces as u32).filter(|&f| sets.find(f) == f).count()
     }
 }
 

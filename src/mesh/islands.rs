@@ -13,6 +13,7 @@
 //! ([`with_island_patches`]); held fixed, it stays closed in space. Measured on the real
 //! garments, 0–194 of their cut edges are slits.
 
+use super::disjoint::DisjointSets;
 use super::{Mesh, MeshError, RawMesh, NONE};
 use std::collections::HashMap;
 
@@ -39,14 +40,7 @@ impl UvIslands {
 pub fn uv_islands(mesh: &Mesh) -> Option<UvIslands> {
     let uv = mesh.uv()?;
     let nf = mesh.num_faces();
-    let mut parent: Vec<u32> = (0..nf as u32).collect();
-    fn find(p: &mut [u32], mut x: u32) -> u32 {
-        while p[x as usize] != x {
-            p[x as usize] = p[p[x as usize] as usize];
-            x = p[x as usize];
-        }
-        x
-    }
+    let mut sets = DisjointSets::new(nf);
     let tris = mesh.triangles();
     let patch = mesh.face_patch();
     // Texture coordinate of vertex v at face f.
@@ -64,14 +58,13 @@ pub fn uv_islands(mesh: &Mesh) -> Option<UvIslands> {
         let [a, b] = conn.edges()[e];
         let (f, g) = (f as usize, g as usize);
         if at(f, a) == at(g, a) && at(f, b) == at(g, b) {
-            let (rf, rg) = (find(&mut parent, f as u32), find(&mut parent, g as u32));
-            parent[rf.max(rg) as usize] = rf.min(rg);
+            sets.union(f as u32, g as u32);
         } else {
             seam_edges += 1;
         }
     }
     // Roots to island numbers, largest first.
-    let roots: Vec<u32> = (0..nf as u32).map(|f| find(&mut parent, f)).collect();
+    let roots: Vec<u32> = (0..nf as u32).map(|f| sets.find(f)).collect();
     let mut size = vec![0usize; nf];
     for &r in &roots {
         size[r as usize] += 1;
@@ -141,14 +134,7 @@ pub fn with_island_patches(mesh: &Mesh, islands: &UvIslands) -> Result<IslandMes
 /// index for the group of its first corner.
 fn open_slits(mesh: &Mesh, uv: &super::UvLayer, islands: &UvIslands, raw: &mut RawMesh) {
     let tris = mesh.triangles();
-    let mut parent: Vec<u32> = (0..3 * tris.len() as u32).collect();
-    fn find(p: &mut [u32], mut x: u32) -> u32 {
-        while p[x as usize] != x {
-            p[x as usize] = p[p[x as usize] as usize];
-            x = p[x as usize];
-        }
-        x
-    }
+    let mut sets = DisjointSets::new(3 * tris.len());
     let corner = |f: usize, v: u32| tris[f].iter().position(|&x| x == v).map(|k| 3 * f + k);
     let coord = |c: usize| {
         let t = uv.triangles[c / 3][c % 3] as usize;
@@ -171,8 +157,7 @@ fn open_slits(mesh: &Mesh, uv: &super::UvLayer, islands: &UvIslands, raw: &mut R
             continue;
         }
         for (a, b) in pairs {
-            let (ra, rb) = (find(&mut parent, a as u32), find(&mut parent, b as u32));
-            parent[ra.max(rb) as usize] = ra.min(rb);
+            sets.union(a as u32, b as u32);
         }
     }
     // The group each vertex keeps, then a copy per further group.
@@ -180,7 +165,7 @@ fn open_slits(mesh: &Mesh, uv: &super::UvLayer, islands: &UvIslands, raw: &mut R
     let mut copies: HashMap<u32, u32> = HashMap::new();
     for c in 0..3 * tris.len() {
         let v = tris[c / 3][c % 3];
-        let root = find(&mut parent, c as u32);
+        let root = sets.find(c as u32);
         if *kept.entry(v).or_insert(root) == root {
             continue;
         }

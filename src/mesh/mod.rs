@@ -22,6 +22,7 @@
 //! | unreferenced vertex | kept (indices stay the file's) but ignored by every measure, with a warning |
 
 mod connectivity;
+pub mod disjoint;
 pub mod islands;
 
 pub use connectivity::{Connectivity, PatchTopology, VertexKind, NONE};
@@ -437,34 +438,28 @@ fn split_bow_ties(
     }
     corners.sort_unstable();
     let mut split: Vec<(u32, u32)> = Vec::new();
-    let (mut parent, mut via) = (Vec::new(), std::collections::HashMap::new());
+    let (mut sets, mut via) = (
+        disjoint::DisjointSets::default(),
+        std::collections::HashMap::new(),
+    );
     for group in corners.chunk_by(|a, b| a.0 == b.0) {
-        // Union–find over the vertex's faces, joined through each neighbour they share.
-        parent.clear();
-        parent.extend(0..group.len());
+        // The vertex's faces, joined through each neighbour they share.
+        sets.reset(group.len());
         via.clear();
-        fn root(parent: &mut [usize], mut i: usize) -> usize {
-            while parent[i] != i {
-                parent[i] = parent[parent[i]];
-                i = parent[i];
-            }
-            i
-        }
         for (i, c) in group.iter().enumerate() {
             for w in [c.2, c.3] {
                 if let Some(&j) = via.get(&w) {
-                    let (a, b) = (root(&mut parent, i), root(&mut parent, j));
-                    parent[a.max(b)] = a.min(b);
+                    sets.union(i as u32, j);
                 } else {
-                    via.insert(w, i);
+                    via.insert(w, i as u32);
                 }
             }
         }
         let v = group[0].0;
         let mut copy_of_root = std::collections::HashMap::new();
-        for i in 0..group.len() {
-            let r = root(&mut parent, i);
-            if r == root(&mut parent, 0) {
+        for i in 0..group.len() as u32 {
+            let r = sets.find(i);
+            if r == 0 {
                 continue;
             }
             let copy = *copy_of_root.entry(r).or_insert_with(|| {
@@ -473,7 +468,7 @@ fn split_bow_ties(
                 split.push((v, copy));
                 copy
             });
-            for x in triangles[group[i].1 as usize].iter_mut() {
+            for x in triangles[group[i as usize].1 as usize].iter_mut() {
                 if *x == v {
                     *x = copy;
                 }
@@ -576,28 +571,17 @@ fn check_uv(uv: &UvLayer, faces: usize) -> Result<(), MeshError> {
 pub fn patch_components(mesh: &Mesh) -> Vec<(String, Vec<u32>)> {
     let nf = mesh.num_faces();
     let fp = mesh.face_patch();
-    let mut parent: Vec<u32> = (0..nf as u32).collect();
-    fn find(p: &mut [u32], mut x: u32) -> u32 {
-        while p[x as usize] != x {
-            let q = p[x as usize];
-            p[x as usize] = p[q as usize];
-            x = q;
-        }
-        x
-    }
+    let mut sets = disjoint::DisjointSets::new(nf);
     for ef in mesh.conn().edge_faces() {
         if ef[1] != NONE && fp[ef[0] as usize] == fp[ef[1] as usize] {
-            let (a, b) = (find(&mut parent, ef[0]), find(&mut parent, ef[1]));
-            if a != b {
-                parent[a.max(b) as usize] = a.min(b);
-            }
+            sets.union(ef[0], ef[1]);
         }
     }
     let mut comps: Vec<Vec<Vec<u32>>> = vec![Vec::new(); mesh.num_patches()];
     let mut comp_of_root: std::collections::HashMap<u32, (usize, usize)> =
         std::collections::HashMap::new();
     for f in 0..nf as u32 {
-        let r = find(&mut parent, f);
+        let r = sets.find(f);
         let p = fp[f as usize] as usize;
         let (pp, k) = *comp_of_root.entry(r).or_insert_with(|| {
             comps[p].push(Vec::new());

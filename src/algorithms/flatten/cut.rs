@@ -18,22 +18,6 @@ fn next(c: usize) -> usize {
     }
 }
 
-fn find(parent: &mut [u32], mut x: u32) -> u32 {
-    while parent[x as usize] != x {
-        let p = parent[x as usize];
-        parent[x as usize] = parent[p as usize];
-        x = p;
-    }
-    x
-}
-
-fn union(parent: &mut [u32], a: u32, b: u32) {
-    let (ra, rb) = (find(parent, a), find(parent, b));
-    if ra != rb {
-        parent[ra.max(rb) as usize] = ra.min(rb);
-    }
-}
-
 #[inline]
 fn key(a: u32, b: u32) -> (u32, u32) {
     (a.min(b), a.max(b))
@@ -49,7 +33,7 @@ pub(crate) fn wedges(
 ) -> (Vec<u32>, usize, Vec<bool>) {
     let nh = tris.len() * 3;
     let he = half_edges_sorted(tris);
-    let mut parent: Vec<u32> = (0..nh as u32).collect();
+    let mut sets = crate::mesh::disjoint::DisjointSets::new(nh);
     let mut boundary = vec![true; nh];
     let mut i = 0;
     while i < he.len() {
@@ -63,8 +47,8 @@ pub(crate) fn wedges(
             // c runs a → b; d must run b → a (consistent orientation): then the corner of c
             // at a meets the corner after d, and the corner after c meets d's, at b.
             if tris[fc][c % 3] != tris[fd][d % 3] {
-                union(&mut parent, c as u32, next(d) as u32);
-                union(&mut parent, next(c) as u32, d as u32);
+                sets.union(c as u32, next(d) as u32);
+                sets.union(next(c) as u32, d as u32);
                 boundary[c] = false;
                 boundary[d] = false;
             }
@@ -75,7 +59,7 @@ pub(crate) fn wedges(
     let mut root_class = vec![u32::MAX; nh];
     let mut n = 0u32;
     for (c, cl) in class.iter_mut().enumerate() {
-        let r = find(&mut parent, c as u32) as usize;
+        let r = sets.find(c as u32) as usize;
         if root_class[r] == u32::MAX {
             root_class[r] = n;
             n += 1;

@@ -684,30 +684,21 @@ pub fn seams_and_slits(mesh: &Mesh, pieces: &[Piece], slits: &HashSet<u32>) -> V
     for k in keys {
         let edges = &groups[&k];
         // chains: union edges sharing a vertex
-        let mut vid: HashMap<u32, usize> = HashMap::new();
-        let mut parent: Vec<usize> = Vec::new();
-        fn find(p: &mut [usize], mut x: usize) -> usize {
-            while p[x] != x {
-                p[x] = p[p[x]];
-                x = p[x];
-            }
-            x
-        }
+        let mut vid: HashMap<u32, u32> = HashMap::new();
         for &e in edges {
             for v in conn.edges()[e] {
-                let n = vid.len();
-                vid.entry(v).or_insert_with(|| {
-                    parent.push(n);
-                    n
-                });
+                let n = vid.len() as u32;
+                vid.entry(v).or_insert(n);
             }
-            let [a, b] = conn.edges()[e];
-            let (ra, rb) = (find(&mut parent, vid[&a]), find(&mut parent, vid[&b]));
-            parent[ra] = rb;
         }
-        let mut chains: Vec<(usize, Vec<usize>)> = Vec::new();
+        let mut sets = crate::mesh::disjoint::DisjointSets::new(vid.len());
         for &e in edges {
-            let r = find(&mut parent, vid[&conn.edges()[e][0]]);
+            let [a, b] = conn.edges()[e];
+            sets.union(vid[&a], vid[&b]);
+        }
+        let mut chains: Vec<(u32, Vec<usize>)> = Vec::new();
+        for &e in edges {
+            let r = sets.find(vid[&conn.edges()[e][0]]);
             match chains.iter_mut().find(|c| c.0 == r) {
                 Some(c) => c.1.push(e),
                 None => chains.push((r, vec![e])),
