@@ -765,14 +765,17 @@ pub fn run(
 /// `seams = auto`: islands that stalled with their seams held are solved again from the input
 /// with the seams free ([`Seams::Free`]: they move, welded, with no constraint of their own),
 /// and that result is taken when it converged or lowered ϖ_max. Held first, because held
-/// seams keep the panels' outlines where the designer drew them, and on the garments that
-/// converge either way freeing them moved the surface farther as often as not (issue 12 note
-/// of 2026-11-27, 25 meshes: relative Hausdorff distance lower on 9, higher on 12; female
-/// casualsuit02 2 → 26 folds). Where held islands stall, the seams are what the panels
-/// needed to move: the unseen mh_shoes03 and mh_fedora converge with them free at 4.0 % and
-/// 14 % of the diagonal moved, against 20 % and 26 % solved whole. Only for a file of one
-/// patch, since the file's own seams are always held. A failed or stopped run keeps the held
-/// result.
+/// seams keep the panels' outlines where the designer drew them and the surface closer: on
+/// the 20 garments and shoes that converge by their islands either way (issue 12 note of
+/// 2026-11-27), freeing the seams moved it farther on 15 (relative Hausdorff distance, e.g.
+/// mh_shoes01 3.6 → 5.9 %) and less on 3, though it left fewer creases past 60° on 18 and a
+/// larger smallest corner on 16. Where held islands stall, the seams are what the panels
+/// needed to move: the unseen mh_shoes03 and mh_fedora converge with them free at 4.4 % and
+/// 14 % of the diagonal moved, against 20 % and 26 % solved whole, and the unseen
+/// mh_male_casualsuit05, which stalled every way, converges (3.6 %): its sleeves, bent tubes
+/// whose seam was held, stalled. It costs a third run where everything stalls
+/// (mh_male_elegantsuit01 377 s → 648 s). Only for a file of one patch, since the file's own
+/// seams are always held. A failed or stopped run keeps the held result.
 fn free_seams(
     work: &Mesh,
     params: &Params,
