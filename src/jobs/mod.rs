@@ -169,7 +169,9 @@ impl Kind {
                  its own, its seams held; a cut inside an island is opened by appending \
                  copies of its vertices), seams=auto|held|free (auto: held, and when the \
                  islands of a one-patch file stall they are solved again with their seams \
-                 free, kept if that converges or lowers the max flattenability; free: the \
+                 free, kept if that converges or lowers the max flattenability, and when \
+                 they converge with more folds than the input, kept if that converges with \
+                 fewer; free: the \
                  seams between patches move with the surface, welded, and only the boundary \
                  is held)"
             }
