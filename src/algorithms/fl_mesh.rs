@@ -725,7 +725,8 @@ pub fn run(
     }
     let folds = |m: &Mesh| crate::geometry::fold_edges(m).len();
     let (folds_in, folds_out) = (folds(mesh), folds(&out));
-    if report.converged && may_free && folds_out > folds_in {
+    // (Not after the free run above: it would be the same run again.)
+    if report.converged && may_free && patches.seams == "held" && folds_out > folds_in {
         let better = |m: &Mesh, r: &Report| {
             let n = folds(m);
             (r.converged && n < folds_out).then(|| format!("it became flattenable with {n}"))
