@@ -3,17 +3,19 @@
 //! programming on the KKT system of Eq. 7.
 //!
 //! Unknowns are the positions of the interior vertices (whole closed fan in one patch);
-//! boundary and seam vertices are never written, so they stay bit-identical. Beyond the paper,
-//! `seams = free` makes the seam vertices unknowns too, without a constraint of their own:
-//! their rows in Eq. 7 keep θ at 2π, ∂θ at 0 and a (2,2) entry of −1, so λ = 0 there and
-//! they move only through the fairness and closeness terms and the constraints of the
+//! boundary and seam vertices are never written, so they stay bit-identical. Beyond the
+//! paper, `seams = free` makes the seam vertices unknowns too, without a constraint of their
+//! own: their rows in Eq. 7 keep θ at 2π, ∂θ at 0 and a (2,2) entry of −1, so λ = 0 there
+//! and they move only through the fairness and closeness terms and the constraints of the
 //! interior vertices around them; the patches stay welded. A sewn cut's vertices (a slit
 //! opened by `patches = uv`) share one row, their rings make its J_fair, and each trial puts
-//! them where it puts that row's vertex, so the cut stays closed (see [`Seams`], [`run`]). Each iteration
-//! assembles Eq. 7 with H of Eq. 10 (w1 = 1, w2 = 0.1 by default), B_p of Eq. 8, B_λ of Eq. 9
-//! and Λ = ∂θ/∂v of Eq. 11 from Propositions 1 and 2, factors it (faer's sparse LDLᵀ of the
-//! quasi-definite system by default, or its sparse LU; the symbolic factorisation is computed
-//! once per mesh, only the numeric one every iteration) and solves for δ and λ.
+//! them where it puts that row's vertex, so the cut stays closed (see [`Seams`], [`run`]).
+//!
+//! Each iteration assembles Eq. 7 with H of Eq. 10 (w1 = 1, w2 = 0.1 by default), B_p of
+//! Eq. 8, B_λ of Eq. 9 and Λ = ∂θ/∂v of Eq. 11 from Propositions 1 and 2, factors it (faer's
+//! sparse LDLᵀ of the quasi-definite system by default, or its sparse LU; the symbolic
+//! factorisation is computed once per mesh, only the numeric one every iteration) and solves
+//! for δ and λ.
 //!
 //! Beyond the paper:
 //! - Never worse. Every iterate is compared with the best so far by ϖ_max (among flattenable
@@ -806,10 +808,11 @@ type Judge<'a> = dyn Fn(&Mesh, &Report) -> Option<String> + 'a;
 /// and that result is taken when it converged or lowered ϖ_max; islands that converged by
 /// folding more edges than the input had are too, and the result is taken when it converged
 /// with fewer (mh_female_casualsuit02: 2 folds held, 1 free as in the input; its smallest
-/// corner 2.3° → 0.5°, the input's 1.0°). `held, better` say what the held run did and
-/// judge the free one. Held first, because held
-/// seams keep the panels' outlines where the designer drew them and the surface closer: on
-/// the 20 garments and shoes that converge by their islands either way (issue 12 note of
+/// corner 2.3° → 0.5°, the input's 1.0°). `held` says what the held run did, `better`
+/// judges the free one.
+///
+/// Held first, because held seams keep the panels' outlines where the designer drew them and
+/// the surface closer: on the 20 garments and shoes that converge by their islands either way (issue 12 note of
 /// 2026-11-27), freeing the seams moved it farther on 15 (relative Hausdorff distance, e.g.
 /// mh_shoes01 3.6 → 5.9 %) and less on 3, though it left fewer creases past 60° on 18 and a
 /// larger smallest corner on 16. Where held islands stall, the seams are what the panels
