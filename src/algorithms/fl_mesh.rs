@@ -725,6 +725,7 @@ pub fn run(
             seams,
         );
     }
+    // Counted as the job's shape check counts them: the input as given against the output.
     let folds = |m: &Mesh| crate::geometry::fold_edges(m).len();
     let (folds_in, folds_out) = (folds(mesh), folds(&out));
     // (Not after the free run above: it would be the same run again.)
@@ -759,7 +760,12 @@ pub fn run(
                         mesh.num_patches()
                     ),
                     opened_vertices: 0,
-                    seams: "held".into(),
+                    seams: if params.seams == Seams::Free {
+                        "free"
+                    } else {
+                        "held"
+                    }
+                    .into(),
                     ..patches
                 };
                 out = whole;
@@ -1440,7 +1446,13 @@ fn solve_retried(
     let (out, report) = if !params.retry {
         (whole_out, whole)
     } else {
-        match parts::split(mesh) {
+        // Parts are solved alone with their seams held where the input has them: with free
+        // seams the whole run moved those, and a merge would mix the two.
+        let split = match params.seams {
+            Seams::Free => None,
+            _ => parts::split(mesh),
+        };
+        match split {
             Some(split) => match retry_parts(mesh, &split, whole_out, whole, params, control) {
                 Ok(done) => done,
                 Err(back) => {
@@ -2299,7 +2311,7 @@ fn solve_phase(
                 report.refined.len(),
                 report.best_iteration,
                 sys.stationarity,
-                sys.n,
+                sys.nc,
             ));
         }
         match end {
@@ -3996,8 +4008,6 @@ mod tests {
         }
     }
 
-    /// The shape penalty's force is −∇ of ½ κ h̄² (Σ (φ − φ⁰)₊² + Σ (α⁰ − α)₊²), by central
-    /// differences, on a flat disk with one vertex moved so that both parts are active.
     /// A flat 9 × 9 grid in two patches, its seam (the column x = 4) bent out of the plane.
     fn grid_with_bent_seam() -> Mesh {
         let positions: Vec<[f64; 3]> = (0..81)
@@ -4154,6 +4164,8 @@ mod tests {
         }
     }
 
+    /// The shape penalty's force is −∇ of ½ κ h̄² (Σ (φ − φ⁰)₊² + Σ (α⁰ − α)₊²), by central
+    /// differences, on a flat disk with one vertex moved so that both parts are active.
     #[test]
     fn shape_penalty_force_is_minus_the_gradient_of_its_energy() {
         let disk = crate::fixtures::all()

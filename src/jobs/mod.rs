@@ -166,8 +166,8 @@ impl Kind {
                  patches when they cut the file's into at most 256 of 16 faces or more on \
                  average, and the file's o/g groups or glTF primitives when those islands \
                  stall and the file's become flattenable; each patch is made flattenable on \
-                 its own, its seams held; a cut inside an island is opened by appending \
-                 copies of its vertices), seams=auto|held|free (auto: held, and when the \
+                 its own, its seams held unless seams frees them; a cut inside an island is \
+                 opened by appending copies of its vertices), seams=auto|held|free (auto: held, and when the \
                  islands of a one-patch file stall they are solved again with their seams \
                  free, kept if that converges or lowers the max flattenability, and when \
                  they converge with more folds than the input, kept if that converges with \

@@ -1,6 +1,7 @@
 //! Independent parts: a mesh's patch components, extracted, solved alone and put back.
 //!
-//! Boundary and seam vertices never move, so the interior vertices of two different connected
+//! Boundary and seam vertices never move (with `seams = free` they do, and the parts are not
+//! used), so the interior vertices of two different connected
 //! parts of a patch share no constraint of Eq. 7 (only the shape penalty's hinges across a
 //! seam see both sides): each part is a problem of its own, and any part's result can be
 //! combined with any other's. Solved together they still share the step
