@@ -826,7 +826,7 @@ type Judge<'a> = dyn Fn(&Mesh, &Report) -> Option<String> + 'a;
 /// 14 % of the diagonal moved, against 20 % and 26 % solved whole, and the unseen
 /// mh_male_casualsuit05, which stalled every way, converges (3.6 %): its sleeves, bent tubes
 /// whose seam was held, stalled. It costs a third run where everything stalls
-/// (mh_male_elegantsuit01 377 s → 648 s). Only for a file of one patch, since the file's own
+/// (mh_male_elegantsuit01 377 s → 526 s). Only for a file of one patch, since the file's own
 /// seams are always held. A failed or stopped run keeps the held result.
 fn free_seams(
     work: &Mesh,
