@@ -689,12 +689,12 @@ pub fn run(
         patches.seams = "free".into();
     }
     let (mut out, mut report) = solve(&work, params, control)?;
-    // Islands chosen by `auto` that stalled (a retry's rule: not a run cut short by
-    // max_iterations, whose stop reason is that word, nor one asked for without retries):
-    // the file's patches are tried too, with a budget of their own, and taken when they
-    // become flattenable (mh_fedora, unseen: its crown and brim stall at 1.3e-2 by islands,
-    // whole it converges on the developable cone over its rim). A failed or stopped second
-    // run keeps the islands' result.
+    // Islands that stalled (a retry's rule: not a run cut short by max_iterations, whose
+    // stop reason is that word, nor one asked for without retries) are solved again with
+    // their seams free (`seams = auto`, [`free_seams`]); if still unconverged and chosen by
+    // `patches = auto`, the file's patches are tried too, with a budget of their own, and
+    // taken when they become flattenable. A failed or stopped later run keeps the result
+    // before it.
     let stalled = !report.converged
         && params.retry
         && params.until == Until::Flattenable
