@@ -17,5 +17,6 @@ pub mod linalg;
 pub mod mesh;
 pub mod pattern;
 pub mod report;
+#[cfg(feature = "service")]
 pub mod service;
 pub mod spatial;
