@@ -755,6 +755,115 @@ fn seams_keep_their_length_on_both_pieces() {
     }
 }
 
+/// `mesh` with the faces that `side` picks given their own copies of the vertices that
+/// `along` picks: the edges between them open into boundary edges at the same positions, as
+/// in a file exported with its panels unwelded or a slit opened by copies.
+fn unweld(mesh: &Mesh, side: impl Fn([f64; 3]) -> bool, along: impl Fn([f64; 3]) -> bool) -> Mesh {
+    let mut raw = mesh.to_raw();
+    let mut copy: std::collections::HashMap<u32, u32> = std::collections::HashMap::new();
+    for t in 0..raw.triangles.len() {
+        let c = raw.triangles[t]
+            .iter()
+            .map(|&v| raw.positions[v as usize])
+            .fold([0.0; 3], |a, p| {
+                [a[0] + p[0] / 3.0, a[1] + p[1] / 3.0, a[2] + p[2] / 3.0]
+            });
+        if !side(c) {
+            continue;
+        }
+        for k in 0..3 {
+            let v = raw.triangles[t][k];
+            if along(raw.positions[v as usize]) {
+                let n = raw.positions.len() as u32;
+                let w = *copy.entry(v).or_insert(n);
+                if w == n {
+                    let p = raw.positions[v as usize];
+                    raw.positions.push(p);
+                }
+                raw.triangles[t][k] = w;
+            }
+        }
+    }
+    assert!(!copy.is_empty(), "nothing unwelded");
+    Mesh::new(raw).unwrap().0
+}
+
+/// The two-patch cylinder with its panels unwelded along the seam: the seam is found by
+/// position and is the welded one's (3D length 0.9, 24 edges a side, lengths kept).
+#[test]
+fn unwelded_panels_are_sewn_where_their_edges_meet() {
+    let welded = two_patch_cylinder();
+    let dt = 2.0 / 39.0;
+    let angle = |p: [f64; 3]| p[1].atan2(p[0]) / dt;
+    let mesh = unweld(
+        &welded,
+        |c| angle(c) > 20.0,
+        |p| (angle(p) - 20.0).abs() < 1e-6,
+    );
+    assert_eq!(mesh.num_vertices(), welded.num_vertices() + 25);
+    let (a, b) = (
+        flatten_mesh(&welded, Method::Lpfb),
+        flatten_mesh(&mesh, Method::Lpfb),
+    );
+    assert_eq!(b.pieces.len(), 2);
+    assert_eq!(b.seams.len(), 1, "{:?}", b.seams);
+    let (s, w) = (&b.seams[0], &a.seams[0]);
+    assert_eq!(s.patches, w.patches);
+    assert!((s.length_3d - 0.9).abs() < 1e-12, "{}", s.length_3d);
+    assert_eq!([s.edges[0].len(), s.edges[1].len()], [24, 24]);
+    for l in s.lengths {
+        assert!((l - 0.9).abs() / 0.9 <= 1e-9, "{l}");
+    }
+    // One piece: the panels, unwelded and in one patch, are two components sewn together.
+    let mut raw = mesh.to_raw();
+    raw.face_patch = vec![0; raw.triangles.len()];
+    raw.patch_names = vec!["panels".into()];
+    let one = flatten_mesh(&Mesh::new(raw).unwrap().0, Method::Lpfb);
+    assert_eq!(one.pieces.len(), 2);
+    assert_eq!(one.seams.len(), 1);
+    assert_eq!(one.seams[0].pieces, [0, 1]);
+}
+
+/// A dart: the cylinder strip slit from its bottom edge halfway up generator 20, the slit
+/// opened by copies. It is a seam of the piece with itself, one side each of the slit, as
+/// long in 3D as the generator's first 12 rows, and as long on both sides.
+#[test]
+fn a_slit_opened_by_copies_is_a_seam_of_its_piece() {
+    let (strip, _) = cylinder(40, 25, 2.0, |_, _| true);
+    let dt = 2.0 / 39.0;
+    let angle = |p: [f64; 3]| p[1].atan2(p[0]) / dt;
+    let tip = 0.9 * (12.0f64 / 24.0).powf(1.3);
+    let mesh = unweld(
+        &strip,
+        |c| angle(c) > 20.0 && c[2] < tip,
+        |p| (angle(p) - 20.0).abs() < 1e-6 && p[2] < tip - 1e-9,
+    );
+    assert_eq!(mesh.num_vertices(), strip.num_vertices() + 12);
+    let pat = flatten_mesh(&mesh, Method::Lpfb);
+    assert_eq!(pat.pieces.len(), 1);
+    assert_eq!(pat.seams.len(), 1, "{:?}", pat.seams);
+    let s = &pat.seams[0];
+    assert_eq!(s.pieces, [0, 0]);
+    assert!(
+        (s.length_3d - tip).abs() < 1e-12,
+        "{} against {tip}",
+        s.length_3d
+    );
+    assert_eq!([s.edges[0].len(), s.edges[1].len()], [12, 12]);
+    // The sides are the slit's two boundaries on the piece: no piece vertex is on both.
+    let ends = |k: usize| -> std::collections::HashSet<u32> {
+        s.edges[k].iter().flatten().copied().collect()
+    };
+    assert_eq!(
+        ends(0).intersection(&ends(1)).count(),
+        1,
+        "only the tip is shared"
+    );
+    for l in s.lengths {
+        assert!((l - tip).abs() / tip <= 1e-9, "{l} against {tip}");
+    }
+}
+
 #[test]
 fn exports_read_back() {
     use flatmesh::io::pattern;

@@ -26,7 +26,9 @@
 //!
 //! `method = "lscm"` replaces 3–5 by a free-boundary LSCM (baseline, as in Table 1).
 //! Seams: every chain of edges shared by two pieces, with its 3D length and its length on both,
-//! and every real cut as a seam of its piece with itself.
+//! and every real cut as a seam of its piece with itself. Two boundary edges that join the same
+//! two positions bit for bit are sewn (`joints`): panels exported unwelded, a slit opened by
+//! copies.
 //!
 //! A piece that cannot be flattened (genus > 0, closed with its curvature spread out) is
 //! skipped with a warning naming it and its triangles; the others are still produced.
@@ -641,15 +643,69 @@ pub fn flatten_piece(
 }
 
 /// Seams: chains of mesh edges whose two faces lie in different pieces, grouped by piece
-/// pair and split into connected chains. Lengths in 3D and on both pieces.
+/// pair and split into connected chains. Lengths in 3D and on both pieces. An edge is also
+/// sewn when two boundary edges join the same two positions bit for bit (a file whose panels
+/// are not welded, a slit opened by copies): see `joints`.
 pub fn seams(mesh: &Mesh, pieces: &[Piece]) -> Vec<Seam> {
     seams_and_slits(mesh, pieces, &HashSet::new())
+}
+
+/// An edge of the sewn surface seen from its two faces.
+struct Joint {
+    /// The mesh edge, or None for two boundary edges sewn by position.
+    edge: Option<u32>,
+    faces: [u32; 2],
+    /// The edge's ends as each face has them: `ends[1][k]` sits where `ends[0][k]` does.
+    ends: [[u32; 2]; 2],
+}
+
+/// Every interior edge, and every pair of boundary edges that join the same two positions bit
+/// for bit (exactly two such edges, in different faces). Without the pairs, a file exported
+/// with its panels unwelded (mh_classicshoes_medium: 544 of its 592 boundary edges) got
+/// patterns with no seam and no notch between its pieces.
+fn joints(mesh: &Mesh) -> Vec<Joint> {
+    let conn = mesh.conn();
+    let key = |v: u32| mesh.position(v).map(f64::to_bits);
+    let mut out = Vec::new();
+    let mut by_ends: HashMap<[[u64; 3]; 2], Vec<usize>> = HashMap::new();
+    for (e, ef) in conn.edge_faces().iter().enumerate() {
+        let [a, b] = conn.edges()[e];
+        if ef[1] != NONE {
+            out.push(Joint {
+                edge: Some(e as u32),
+                faces: *ef,
+                ends: [[a, b]; 2],
+            });
+        } else {
+            let (ka, kb) = (key(a), key(b));
+            by_ends.entry([ka.min(kb), ka.max(kb)]).or_default().push(e);
+        }
+    }
+    let mut pairs: Vec<[usize; 2]> = by_ends
+        .into_values()
+        .filter_map(|es| <[usize; 2]>::try_from(es).ok())
+        .collect();
+    pairs.sort_unstable();
+    for [e0, e1] in pairs {
+        let (f0, f1) = (conn.edge_faces()[e0][0], conn.edge_faces()[e1][0]);
+        let ([a, b], [c, d]) = (conn.edges()[e0], conn.edges()[e1]);
+        if f0 == f1 {
+            continue;
+        }
+        let other = if key(c) == key(a) { [c, d] } else { [d, c] };
+        out.push(Joint {
+            edge: None,
+            faces: [f0, f1],
+            ends: [[a, b], other],
+        });
+    }
+    out
 }
 
 /// [`seams`], plus the mesh edges in `slits` whose two faces lie in one piece that is cut
 /// there (segmentation's dangling cuts), each simple path of them a seam of that piece with
 /// itself: side 0 the faces on its left (where an edge runs in walking order), as
-/// [`cut_seams`].
+/// [`cut_seams`]. Boundary edges sewn by position within one piece are such a slit too.
 pub fn seams_and_slits(mesh: &Mesh, pieces: &[Piece], slits: &HashSet<u32>) -> Vec<Seam> {
     // global face → (piece, local triangle)
     let mut where_: Vec<(u32, u32)> = vec![(u32::MAX, 0); mesh.num_faces()];
@@ -658,17 +714,23 @@ pub fn seams_and_slits(mesh: &Mesh, pieces: &[Piece], slits: &HashSet<u32>) -> V
             where_[f as usize] = (pi as u32, t as u32);
         }
     }
-    let conn = mesh.conn();
+    let joints = joints(mesh);
+    // Chains are built on one vertex per position, so that both sides of a sewn edge and
+    // the welded edges beside it join up.
+    let mut first: HashMap<[u64; 3], u32> = HashMap::new();
+    let canon: Vec<u32> = (0..mesh.num_vertices() as u32)
+        .map(|v| *first.entry(mesh.position(v).map(f64::to_bits)).or_insert(v))
+        .collect();
+    let pair = |j: &Joint| j.ends[0].map(|v| canon[v as usize]);
     let mut groups: HashMap<(u32, u32), Vec<usize>> = HashMap::new();
-    for (e, ef) in conn.edge_faces().iter().enumerate() {
-        if ef[1] == NONE {
-            continue;
-        }
-        let (pa, pb) = (where_[ef[0] as usize].0, where_[ef[1] as usize].0);
-        if (pa != pb || slits.contains(&(e as u32))) && pa != u32::MAX && pb != u32::MAX {
-            groups.entry((pa.min(pb), pa.max(pb))).or_default().push(e);
+    for (k, j) in joints.iter().enumerate() {
+        let (pa, pb) = (where_[j.faces[0] as usize].0, where_[j.faces[1] as usize].0);
+        let cut = j.edge.is_none_or(|e| slits.contains(&e));
+        if (pa != pb || cut) && pa != u32::MAX && pb != u32::MAX {
+            groups.entry((pa.min(pb), pa.max(pb))).or_default().push(k);
         }
     }
+    let pairs: Vec<[u32; 2]> = joints.iter().map(pair).collect();
     let mut keys: Vec<(u32, u32)> = groups.keys().copied().collect();
     keys.sort_unstable();
     // 2D position of global vertex v in piece `pi` through face f
@@ -682,26 +744,26 @@ pub fn seams_and_slits(mesh: &Mesh, pieces: &[Piece], slits: &HashSet<u32>) -> V
     let d2 = |a: [f64; 2], b: [f64; 2]| ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt();
     let mut out = Vec::new();
     for k in keys {
-        let edges = &groups[&k];
-        // chains: union edges sharing a vertex
+        let members = &groups[&k];
+        // chains: union joints sharing a (canonical) vertex
         let mut vid: HashMap<u32, u32> = HashMap::new();
-        for &e in edges {
-            for v in conn.edges()[e] {
+        for &j in members {
+            for v in pairs[j] {
                 let n = vid.len() as u32;
                 vid.entry(v).or_insert(n);
             }
         }
         let mut sets = crate::mesh::disjoint::DisjointSets::new(vid.len());
-        for &e in edges {
-            let [a, b] = conn.edges()[e];
+        for &j in members {
+            let [a, b] = pairs[j];
             sets.union(vid[&a], vid[&b]);
         }
         let mut chains: Vec<(u32, Vec<usize>)> = Vec::new();
-        for &e in edges {
-            let r = sets.find(vid[&conn.edges()[e][0]]);
+        for &j in members {
+            let r = sets.find(vid[&pairs[j][0]]);
             match chains.iter_mut().find(|c| c.0 == r) {
-                Some(c) => c.1.push(e),
-                None => chains.push((r, vec![e])),
+                Some(c) => c.1.push(j),
+                None => chains.push((r, vec![j])),
             }
         }
         // A slit's sides are its left and right: it is split into simple paths, each edge
@@ -710,9 +772,9 @@ pub fn seams_and_slits(mesh: &Mesh, pieces: &[Piece], slits: &HashSet<u32>) -> V
             .into_iter()
             .flat_map(|(_, ch)| {
                 if k.0 == k.1 {
-                    simple_paths(&ch, conn.edges())
+                    simple_paths(&ch, &pairs)
                 } else {
-                    let dir = ch.iter().map(|&e| conn.edges()[e]).collect();
+                    let dir = ch.iter().map(|&j| pairs[j]).collect();
                     vec![(ch, dir)]
                 }
             })
@@ -726,9 +788,14 @@ pub fn seams_and_slits(mesh: &Mesh, pieces: &[Piece], slits: &HashSet<u32>) -> V
                 pieces: [k.0 as usize, k.1 as usize],
                 ..Seam::default()
             };
-            for (&e, &[a, b]) in ch.iter().zip(&dir) {
-                s.length_3d += cut::dist(mesh.position(a), mesh.position(b));
-                for &f in &conn.edge_faces()[e] {
+            for (&j, &d) in ch.iter().zip(&dir) {
+                let joint = &joints[j];
+                let forward = d == pairs[j];
+                let [p0, q0] = joint.ends[0];
+                s.length_3d += cut::dist(mesh.position(p0), mesh.position(q0));
+                for (&f, &[p, q]) in joint.faces.iter().zip(&joint.ends) {
+                    // this face's copies of the walk's ends
+                    let (a, b) = if forward { (p, q) } else { (q, p) };
                     let pi = where_[f as usize].0;
                     let side = if k.0 == k.1 {
                         // side 0: the face where the edge runs a → b
