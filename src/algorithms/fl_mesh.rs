@@ -179,7 +179,7 @@
 //!   edge wants collapsing) and overlapping hinges (whose edge wants the other diagonal). A
 //!   flattenable result's remaining new folds and slivers are mended so, θ = 2π is solved
 //!   again from there (the angle sums of the few vertices whose fans changed move) and
-//!   unfolded, in up to [`REMESH_ROUNDS`] rounds, each kept only when the output is
+//!   unfolded, in up to [`FOLD_ROUNDS`] rounds, each kept only when the output is
 //!   flattenable with fewer new folds plus slivers. A collapsed vertex stays in the output,
 //!   unreferenced, at the position of the vertex it was merged into, so input vertex i is
 //!   still output vertex i; texture coordinates are dropped once faces change, as with
@@ -1171,12 +1171,21 @@ fn new_defects(input: &Mesh, out: &Mesh, min_corner: f64) -> Defects {
     Defects { folds, slivers }
 }
 
-/// Rounds of [`remesh_defects`]. Measured (issue 12 note of 2026-11-27, 9 garments): one
-/// round was kept on six, two on GarmentTransfer's shirt and on MakeHuman's two female
-/// casual suits, a third never. On unconverged results (session 26): all three were kept on
+/// Rounds of [`remesh_defects`] on an unconverged result. Measured (issue 12 note of
+/// 2026-11-27, 9 garments, when this bounded both kinds of round): one round was kept on
+/// six, two on GarmentTransfer's shirt and on MakeHuman's two female casual suits, a third
+/// never. On unconverged results (session 26): all three were kept on
 /// mh_female_elegantsuit01 and an unseen male casual suit, where six took ϖ_max 1.4e-2 →
 /// 3.2e-3 instead of 5.3e-3, for 357 s instead of 251 s, still unconverged.
 const REMESH_ROUNDS: usize = 3;
+
+/// Rounds of [`remesh_defects`] on a flattenable result: each is kept only when it leaves
+/// fewer new folds plus slivers, so the rounds end by themselves at the first that does not
+/// help; this only bounds their time. Measured (session 29, against 3; unseen MakeHuman
+/// suits): male casualsuit02 4 → 2 new folds in 5 rounds (30 → 38 s), casualsuit01 10 → 9
+/// new folds in 7 (9 folds in all, its input 11); casualsuit05 and female casualsuit02
+/// ended by themselves at 3 and 2, as before.
+const FOLD_ROUNDS: usize = 10;
 
 /// A result's new folds and slivers that unfolding left, mended by connectivity
 /// ([`super::remesh::mend`]: flip a fold's edge or a cap's long edge, collapse a needle's
@@ -1186,8 +1195,9 @@ const REMESH_ROUNDS: usize = 3;
 /// unconverged one (whose stall the slivers and folds feed: on the stalled suits the
 /// linearised θ is worst at caps and near-folded fans, where 0.01 h̄ of the step moves θ by
 /// 0.5 rad) a round is kept when it lowers ϖ_max, as the retries and the detour are, and a
-/// refused round is tried once more with the slivers mended first; once a round made it
-/// flattenable, up to [`REMESH_ROUNDS`] more follow under the first rule.
+/// refused round is tried once more with the slivers mended first, for up to
+/// [`REMESH_ROUNDS`] rounds; once a round made it flattenable, up to [`FOLD_ROUNDS`] more
+/// follow under the first rule.
 /// Vertices a collapse removed stay unreferenced, at the final position of the vertex they
 /// were merged into. A failure or stop of a round keeps the result before it.
 fn remesh_defects(
@@ -1227,15 +1237,20 @@ fn remesh_defects(
         ..params.clone()
     };
     // Rounds since the result became flattenable (or since the start): an unconverged
-    // result gets REMESH_ROUNDS towards convergence, then as many for its folds.
+    // result gets REMESH_ROUNDS towards convergence, then FOLD_ROUNDS for its folds.
     let mut in_mode = 0;
-    // One past the most rounds (REMESH_ROUNDS in each mode), so the limit is said.
-    for round in 1..=2 * REMESH_ROUNDS + 1 {
+    // One past the most rounds, so the limit is said.
+    for round in 1..=REMESH_ROUNDS + FOLD_ROUNDS + 1 {
         if defects.counts() == (0, 0) {
             break;
         }
-        if in_mode == REMESH_ROUNDS {
-            done.stop_reason = format!("the limit of {REMESH_ROUNDS} rounds was reached");
+        let limit = if report.converged {
+            FOLD_ROUNDS
+        } else {
+            REMESH_ROUNDS
+        };
+        if in_mode == limit {
+            done.stop_reason = format!("the limit of {limit} rounds was reached");
             break;
         }
         in_mode += 1;
