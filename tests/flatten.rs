@@ -420,6 +420,78 @@ fn ipc_dress_panels_match_their_vt_pattern() {
     }
 }
 
+/// mh_classicshoes_medium, whose panels are unwelded (most of its boundary edges have a twin
+/// joining the same two positions): every such pair, found here from positions alone, is
+/// one edge on one side of a seam and its twin on the other, and the seams between pieces
+/// keep their length on both.
+#[test]
+fn an_unwelded_shoe_is_sewn_between_its_pieces() {
+    let Some(mesh) = shared("shoe/mh_classicshoes_medium.obj") else {
+        return;
+    };
+    let key = |v: u32| mesh.position(v).map(f64::to_bits);
+    let mut count: std::collections::HashMap<Vec<[u64; 3]>, Vec<[u32; 2]>> =
+        std::collections::HashMap::new();
+    let mut uses: std::collections::HashMap<[u32; 2], usize> = std::collections::HashMap::new();
+    for t in mesh.triangles() {
+        for k in 0..3 {
+            let (a, b) = (t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3]));
+            *uses.entry([a, b]).or_default() += 1;
+        }
+    }
+    for (&[a, b], &n) in &uses {
+        if n == 1 {
+            let mut k = vec![key(a), key(b)];
+            k.sort_unstable();
+            count.entry(k).or_default().push([a, b]);
+        }
+    }
+    let twins: Vec<[[u32; 2]; 2]> = count
+        .into_values()
+        .filter(|es| es.len() == 2)
+        .map(|es| [es[0], es[1]])
+        .collect();
+    assert!(twins.len() >= 200, "{} twin pairs", twins.len());
+    let pat = flatten_mesh(&mesh, Method::Lpfb);
+    // (seam, side) → its edges as sorted pairs of mesh vertices
+    let mut sides: Vec<[std::collections::HashSet<[u32; 2]>; 2]> = Vec::new();
+    for s in &pat.seams {
+        sides.push([0, 1].map(|k| {
+            let piece = &pat.pieces[s.pieces[k]];
+            s.edges[k]
+                .iter()
+                .map(|e| {
+                    let [a, b] = e.map(|v| piece.vertex_ids[v as usize]);
+                    [a.min(b), a.max(b)]
+                })
+                .collect()
+        }));
+    }
+    for [e, f] in &twins {
+        assert!(
+            sides
+                .iter()
+                .any(|[x, y]| (x.contains(e) && y.contains(f)) || (x.contains(f) && y.contains(e))),
+            "boundary edges {e:?} and {f:?} meet but are on no seam's two sides"
+        );
+    }
+    let between: Vec<_> = pat
+        .seams
+        .iter()
+        .filter(|s| s.pieces[0] != s.pieces[1])
+        .collect();
+    assert!(between.len() >= 6, "{} seams between pieces", between.len());
+    for s in between {
+        for l in s.lengths {
+            assert!(
+                (l - s.length_3d).abs() <= 1e-9 * s.length_3d,
+                "{l} against {}",
+                s.length_3d
+            );
+        }
+    }
+}
+
 #[test]
 fn gf_skirt_against_its_flat_pattern() {
     let (Some(m3), Some(m2)) = (
