@@ -2446,32 +2446,15 @@ fn sewn_cuts(mesh: &Mesh) -> Vec<Vec<u32>> {
     use std::collections::HashMap;
     let conn = mesh.conn();
     let key = |v: u32| mesh.position(v).map(f64::to_bits);
-    let edge_key = |e: &[u32; 2]| {
-        let (a, b) = (key(e[0]), key(e[1]));
-        if a <= b {
-            (a, b)
-        } else {
-            (b, a)
-        }
-    };
-    let open: Vec<&[u32; 2]> = conn
-        .edges()
-        .iter()
-        .zip(conn.edge_faces())
-        .filter(|(_, f)| f[1] == NONE)
-        .map(|(e, _)| e)
-        .collect();
-    let mut count: HashMap<_, usize> = HashMap::new();
-    for e in &open {
-        *count.entry(edge_key(e)).or_default() += 1;
-    }
     let nv = mesh.num_vertices();
     let (mut on_cut, mut held) = (vec![false; nv], vec![false; nv]);
-    for e in &open {
-        let sewn = count[&edge_key(e)] >= 2;
-        for &v in e.iter() {
-            on_cut[v as usize] = true;
-            held[v as usize] |= !sewn;
+    for group in crate::mesh::boundary_edges_by_position(mesh) {
+        let sewn = group.len() >= 2;
+        for e in group {
+            for v in conn.edges()[e] {
+                on_cut[v as usize] = true;
+                held[v as usize] |= !sewn;
+            }
         }
     }
     let mut groups: HashMap<[u64; 3], Vec<u32>> = HashMap::new();

@@ -605,6 +605,25 @@ pub fn patch_components(mesh: &Mesh) -> Vec<(String, Vec<u32>)> {
     out
 }
 
+/// The boundary edges grouped by the positions of their two ends, bit for bit and in either
+/// order, each group in ascending edge order (the groups in no set order). A group of two or
+/// more is an edge left unwelded: a seam between panels exported apart, or a slit opened by
+/// copies (fl-mesh moves such copies as one, flatten sews them).
+pub fn boundary_edges_by_position(mesh: &Mesh) -> Vec<Vec<usize>> {
+    let conn = mesh.conn();
+    let key = |v: u32| mesh.position(v).map(f64::to_bits);
+    let mut groups: std::collections::HashMap<[[u64; 3]; 2], Vec<usize>> =
+        std::collections::HashMap::new();
+    for (e, faces) in conn.edge_faces().iter().enumerate() {
+        if faces[1] == NONE {
+            let [a, b] = conn.edges()[e];
+            let (ka, kb) = (key(a), key(b));
+            groups.entry([ka.min(kb), ka.max(kb)]).or_default().push(e);
+        }
+    }
+    groups.into_values().collect()
+}
+
 /// The bounding box of points.
 pub fn bbox_of(points: impl Iterator<Item = [f64; 3]>) -> ([f64; 3], [f64; 3]) {
     let mut lo = [f64::INFINITY; 3];

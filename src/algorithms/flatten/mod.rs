@@ -665,27 +665,23 @@ struct Joint {
 /// patterns with no seam and no notch between its pieces.
 fn joints(mesh: &Mesh) -> Vec<Joint> {
     let conn = mesh.conn();
-    let key = |v: u32| mesh.position(v).map(f64::to_bits);
-    let mut out = Vec::new();
-    let mut by_ends: HashMap<[[u64; 3]; 2], Vec<usize>> = HashMap::new();
-    for (e, ef) in conn.edge_faces().iter().enumerate() {
-        let [a, b] = conn.edges()[e];
-        if ef[1] != NONE {
-            out.push(Joint {
-                edge: Some(e as u32),
-                faces: *ef,
-                ends: [[a, b]; 2],
-            });
-        } else {
-            let (ka, kb) = (key(a), key(b));
-            by_ends.entry([ka.min(kb), ka.max(kb)]).or_default().push(e);
-        }
-    }
-    let mut pairs: Vec<[usize; 2]> = by_ends
-        .into_values()
+    let mut out: Vec<Joint> = conn
+        .edge_faces()
+        .iter()
+        .enumerate()
+        .filter(|(_, ef)| ef[1] != NONE)
+        .map(|(e, ef)| Joint {
+            edge: Some(e as u32),
+            faces: *ef,
+            ends: [conn.edges()[e]; 2],
+        })
+        .collect();
+    let mut pairs: Vec<[usize; 2]> = crate::mesh::boundary_edges_by_position(mesh)
+        .into_iter()
         .filter_map(|es| <[usize; 2]>::try_from(es).ok())
         .collect();
     pairs.sort_unstable();
+    let key = |v: u32| mesh.position(v).map(f64::to_bits);
     for [e0, e1] in pairs {
         let (f0, f1) = (conn.edge_faces()[e0][0], conn.edge_faces()[e1][0]);
         let ([a, b], [c, d]) = (conn.edges()[e0], conn.edges()[e1]);
