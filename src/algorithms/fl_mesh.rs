@@ -1004,7 +1004,9 @@ pub fn choose_patches(mesh: &Mesh, wanted: Patches) -> Result<(Mesh, PatchesUsed
 /// (flattenable first, then the lower ϖ_max: the issue's merit; the penalised-first choice
 /// above is made inside each run). Parts share no constraint, only the shape penalty's
 /// hinges across a seam, which a part alone does not see: a part whose result, combined,
-/// folds a seam edge that the whole run's result did not fold gives it up. A part keeps the
+/// folds a seam edge that neither the whole run's result nor the input folds gives it up,
+/// unless giving up such results leaves the combined mesh unflattenable where keeping them
+/// would not (ϖ_max first; the folds are then `unfold`'s and `remesh`'s). A part keeps the
 /// whole run's result when its own runs fail or are stopped. So no part takes more than three
 /// times `max_iterations`; the reported `iterations` (every run's, chained in `history`,
 /// whose ϖ_max is then each run's own mesh's) can reach (1 + 2·parts)·`max_iterations`.
@@ -1537,8 +1539,13 @@ fn retry_parts(
         .map(|run| run.as_ref().is_some_and(|r| r.kept != "whole"))
         .collect();
     // Parts share no constraint, but the shape penalty's hinges across a seam see both sides:
-    // a part that, combined, folds a seam edge the whole run did not fold gives its result up.
-    let out = loop {
+    // a part that, combined, folds a seam edge that neither the whole run nor the input folds
+    // gives its result up (and so may its neighbours, against that part's result from the
+    // whole run). Unless that costs flattenability: ϖ_max comes first, and the folds are then
+    // left to `unfold` and `remesh` (mh_male_elegantsuit01: all 23 islands converge alone, but
+    // their seam folds gave every large island up and the job ended at 5e-2; see
+    // [`parts::new_seam_folds`]).
+    let merged_with = |own: &[bool]| -> Option<Mesh> {
         let chosen: Vec<&Mesh> = (0..total)
             .map(|k| match (&runs[k], own[k]) {
                 (Some(run), true) => &run.mesh,
@@ -1546,18 +1553,42 @@ fn retry_parts(
             })
             .collect();
         let raw = parts::merge(mesh, split, &chosen);
-        let merged = match Mesh::new(raw.clone()) {
-            Ok((m, _)) if m.triangles() == &raw.triangles[..] => m,
-            _ => return Err(Box::new((whole_out, whole))),
-        };
+        match Mesh::new(raw.clone()) {
+            Ok((m, _)) if m.triangles() == &raw.triangles[..] => Some(m),
+            _ => None,
+        }
+    };
+    let own_first = own.clone();
+    let Some(all_own) = merged_with(&own) else {
+        return Err(Box::new((whole_out, whole)));
+    };
+    let mut merged = all_own.clone();
+    loop {
         let folds = parts::new_seam_folds(mesh, split, &whole_out, &merged);
         let back: Vec<usize> = folds.into_iter().filter(|&k| own[k]).collect();
         if back.is_empty() {
-            break merged;
+            break;
         }
         for k in back {
             own[k] = false;
         }
+        let Some(m) = merged_with(&own) else {
+            return Err(Box::new((whole_out, whole)));
+        };
+        merged = m;
+    }
+    let flat = |m: &Mesh| wmax(m) <= params.tolerance;
+    let seam_folds_kept = own != own_first && flat(&all_own) && !flat(&merged);
+    let out = if seam_folds_kept {
+        own = own_first;
+        all_own
+    } else {
+        merged
+    };
+    let folding = if seam_folds_kept {
+        parts::new_seam_folds(mesh, split, &whole_out, &out)
+    } else {
+        Vec::new()
     };
     let whole_refined = std::mem::take(&mut whole.refined);
     let mut report = whole;
@@ -1602,6 +1633,13 @@ fn retry_parts(
                 row.kept = run.kept.into();
                 row.converged = r.converged;
                 row.max_flattenability = r.max_flattenability;
+                if folding.contains(&k) {
+                    row.stop_reason = format!(
+                        "{}; kept though combined with the other parts it folds a seam edge \
+                         (without it the whole would not be flattenable)",
+                        row.stop_reason
+                    );
+                }
             } else if run.kept != "whole" {
                 row.stop_reason = format!(
                     "{}; not kept: combined with the other parts it folds a seam edge",

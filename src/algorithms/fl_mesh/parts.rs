@@ -200,7 +200,8 @@ pub(super) fn restrict(out: &Mesh, mesh: &Mesh, parts: &[Part]) -> Option<Vec<(M
 }
 
 /// Parts (indices into `parts`) on either side of a seam edge that `merged` folds (adjacent
-/// normals turning past [`crate::geometry::FOLD_ANGLE`]) and `whole_out` does not. A seam edge
+/// normals turning past [`crate::geometry::FOLD_ANGLE`]) and neither `whole_out` nor the input
+/// `mesh` does (an input's own fold at a seam, a lapel turned over, is no new fold). A seam edge
 /// keeps its two input faces' indices in both: refinement rewrites a fan triangle in place and
 /// keeps its edge opposite the refined vertex, the only one a seam edge can be.
 pub(super) fn new_seam_folds(
@@ -228,7 +229,7 @@ pub(super) fn new_seam_folds(
         if g == NONE || part_of[f as usize] == part_of[g as usize] {
             continue;
         }
-        if folded(merged, f, g) && !folded(whole_out, f, g) {
+        if folded(merged, f, g) && !folded(whole_out, f, g) && !folded(mesh, f, g) {
             for p in [part_of[f as usize], part_of[g as usize]] {
                 if p != NONE {
                     out.push(p as usize);
