@@ -4044,6 +4044,58 @@ mod tests {
         }
     }
 
+    /// mh_male_elegantsuit01's 23 texture islands each converge alone, but combined their
+    /// results fold seam edges that neither the input nor the whole run's result fold; giving
+    /// those parts up (and then their neighbours) left the job at ϖ_max 5e-2 after 526 s
+    /// (issue 12 note of 2026-11-28). The whole run's result is stood in for by the input, as
+    /// if it had made no progress, so every seam fold of the merge is new. With the old rule
+    /// (always give up) the merge ends at ϖ_max 2.0 (checked).
+    #[test]
+    fn converged_parts_are_kept_though_they_fold_a_seam_when_giving_them_up_costs_flattenability() {
+        let Some(path) = crate::corpus::shared_mesh_for_tests("garment/mh_male_elegantsuit01.obj")
+        else {
+            return;
+        };
+        let bytes = std::fs::read(&path).expect("readable");
+        let (mesh, _) = crate::io::load(&bytes, crate::io::Format::Obj).expect("valid");
+        let (work, used) = choose_patches(&mesh, Patches::Uv).expect("islands");
+        assert_eq!(used.count, 23);
+        let split = parts::split(&work).expect("independent parts");
+        let tolerance = Params::default().tolerance;
+        let before = crate::geometry::max_flattenability(&work);
+        assert!(before > 1.0, "{before}");
+        let whole = Report {
+            max_flattenability: before,
+            ..Report::default()
+        };
+        let (out, report) = match retry_parts(
+            &work,
+            &split,
+            work.clone(),
+            whole,
+            &Params::default(),
+            &super::super::Silent::default(),
+        ) {
+            Ok(done) => done,
+            Err(_) => panic!("the parts could not be merged"),
+        };
+        // Measured on the merged mesh's own angles, not taken from the report.
+        let after = crate::geometry::max_flattenability(&out);
+        assert!(after <= tolerance, "ϖ_max {after:.2e}");
+        assert!(report.converged);
+        assert!(report.parts.iter().all(|p| p.kept != "whole"));
+        // The rule was exercised: the merge folds seam edges the input does not.
+        let folding = parts::new_seam_folds(&work, &split, &work, &out);
+        assert!(!folding.is_empty());
+        for k in folding {
+            assert!(
+                report.parts[k].stop_reason.contains("kept though"),
+                "{}",
+                report.parts[k].stop_reason
+            );
+        }
+    }
+
     /// A flat 9 × 9 grid in two patches, its seam (the column x = 4) bent out of the plane.
     fn grid_with_bent_seam() -> Mesh {
         let positions: Vec<[f64; 3]> = (0..81)
