@@ -432,8 +432,8 @@ mod tests {
 
     /// A flat 7 × 7 grid of unit cells: patch "b" is two 2 × 2 blocks meeting only at the
     /// grid point (3, 3), patch "a" everything else, so "a" meets itself there too: two
-    /// wedges of one part at one seam vertex (a bow-tie within the part), lifted off the plane
-    /// inside the panels so that there is something to solve.
+    /// wedges of one part at one seam vertex (a bow-tie within the part). Every grid point is
+    /// lifted by a pseudo-random 0–0.2, so that there is something to solve.
     fn bow_tie_panels() -> Mesh {
         let w = 8u32;
         let positions = (0..w * w)
