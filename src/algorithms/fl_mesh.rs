@@ -704,45 +704,42 @@ pub fn run(
         && mesh.num_patches() == 1
         && params.retry
         && params.until == Until::Flattenable;
-    if stalled && may_free {
-        let w = report.max_flattenability;
-        let better = |_: &Mesh, r: &Report| {
-            if r.converged {
-                Some("it became flattenable".to_string())
-            } else {
-                (r.max_flattenability < w)
-                    .then(|| format!("it reached ϖ_max {:.2e}", r.max_flattenability))
-            }
-        };
-        let held = format!("it stalled at ϖ_max {w:.2e}");
-        let seams = (held.as_str(), &better as &Judge);
-        free_seams(
-            &work,
-            params,
-            control,
-            (&mut out, &mut report),
-            &mut patches,
-            seams,
-        );
-    }
     // Counted as the job's shape check counts them: the input as given against the output.
     let folds = |m: &Mesh| crate::geometry::fold_edges(m).len();
     let (folds_in, folds_out) = (folds(mesh), folds(&out));
-    // (Not after the free run above: it would be the same run again.)
-    if report.converged && may_free && patches.seams == "held" && folds_out > folds_in {
-        let better = |m: &Mesh, r: &Report| {
-            let n = folds(m);
-            (r.converged && n < folds_out).then(|| format!("it became flattenable with {n}"))
-        };
+    let w = report.max_flattenability;
+    let lower = |_: &Mesh, r: &Report| {
+        if r.converged {
+            Some("it became flattenable".to_string())
+        } else {
+            (r.max_flattenability < w)
+                .then(|| format!("it reached ϖ_max {:.2e}", r.max_flattenability))
+        }
+    };
+    let fewer = |m: &Mesh, r: &Report| {
+        let n = folds(m);
+        (r.converged && n < folds_out).then(|| format!("it became flattenable with {n}"))
+    };
+    // What the held islands did that the free ones are asked to do better (a stall and a
+    // converged run exclude each other, so at most one free run).
+    let why: Option<(String, &Judge)> = if !may_free {
+        None
+    } else if stalled {
+        Some((format!("it stalled at ϖ_max {w:.2e}"), &lower))
+    } else if report.converged && folds_out > folds_in {
         let held = format!("it folded {folds_out} edges (the input {folds_in})");
-        let seams = (held.as_str(), &better as &Judge);
+        Some((held, &fewer))
+    } else {
+        None
+    };
+    if let Some((held, better)) = why {
         free_seams(
             &work,
             params,
             control,
             (&mut out, &mut report),
             &mut patches,
-            seams,
+            (held.as_str(), better),
         );
     }
     if stalled && !report.converged && patches.source == "uv" && params.patches == Patches::Auto {
