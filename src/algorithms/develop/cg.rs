@@ -95,7 +95,7 @@ pub(super) fn run(
     }
     let mut kkt = match params.preconditioner {
         Preconditioner::None => None,
-        Preconditioner::GaussNewton => Some(Kkt::new(model, movable)?),
+        Preconditioner::GaussNewton => Some(Kkt::new(model, movable, control)?),
     };
     for k in 1..=params.max_iterations {
         if control.cancelled() {

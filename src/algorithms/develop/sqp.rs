@@ -125,7 +125,7 @@ pub(super) fn run(
         run.stop = Stop::Tolerance;
         return Ok(run);
     }
-    let mut kkt = Kkt::new(model, movable)?;
+    let mut kkt = Kkt::new(model, movable, control)?;
     let cons = kkt.cons.clone();
     let h = crate::geometry::mean_edge_length(model.mesh());
     if !(h > 0.0 && h.is_finite()) {
@@ -499,7 +499,24 @@ pub(super) struct Kkt {
 }
 
 impl Kkt {
-    pub(super) fn new(model: &Model<'_>, movable: &[bool]) -> Result<Self, AlgoError> {
+    /// The pattern and its symbolic factorisation; not started when `control` says the
+    /// step (~3 s on a Loop-subdivided 205k-face mesh, uninterruptible) would end too late.
+    pub(super) fn new(
+        model: &Model<'_>,
+        movable: &[bool],
+        control: &dyn Control,
+    ) -> Result<Self, AlgoError> {
+        let faces = model.mesh().num_faces() as f64;
+        if control.cancelled_before(crate::cost::DEVELOP_SETUP.seconds(faces)) {
+            return Err(AlgoError::Cancelled);
+        }
+        let setup = std::time::Instant::now();
+        let kkt = Self::unchecked(model, movable)?;
+        crate::cost::DEVELOP_SETUP.learn(faces, setup.elapsed().as_secs_f64());
+        Ok(kkt)
+    }
+
+    fn unchecked(model: &Model<'_>, movable: &[bool]) -> Result<Self, AlgoError> {
         let mesh = model.mesh();
         let nv = mesh.num_vertices();
         let mut slot = vec![NONE; nv];
