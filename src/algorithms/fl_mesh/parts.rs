@@ -318,34 +318,44 @@ mod tests {
     }
 
     /// [`two_panels`] with the height of grid point (i, j) off the panels' borders given.
-    fn two_panels_with(k: u32, seam: bool, z: impl Fn(u32, u32) -> f64) -> Mesh {
-        let w = 2 * k + 1;
-        let mut positions = Vec::new();
-        for j in 0..=k {
-            for i in 0..w {
-                let inside = i % k != 0 && j % k != 0;
-                positions.push([i as f64, j as f64, if inside { z(i, j) } else { 0.0 }]);
-            }
-        }
+    /// A grid of `w`×`h` vertices, vertex (i, j) at `at(i, j)`, both triangles of cell (i, j)
+    /// in patch `patch(i, j)` of `names`.
+    fn grid(
+        (w, h): (u32, u32),
+        at: impl Fn(u32, u32) -> [f64; 3],
+        patch: impl Fn(u32, u32) -> u32,
+        names: &[&str],
+    ) -> Mesh {
+        let positions = (0..w * h).map(|v| at(v % w, v / w)).collect();
         let mut triangles = Vec::new();
         let mut face_patch = Vec::new();
-        for j in 0..k {
+        for j in 0..h - 1 {
             for i in 0..w - 1 {
                 let a = j * w + i;
                 triangles.push([a, a + 1, a + w + 1]);
                 triangles.push([a, a + w + 1, a + w]);
-                let p = u32::from(seam && i >= k);
-                face_patch.extend([p, p]);
+                face_patch.extend([patch(i, j); 2]);
             }
         }
         let raw = RawMesh {
             positions,
             triangles,
             face_patch,
-            patch_names: vec!["left".into(), "right".into()],
+            patch_names: names.iter().map(|&n| n.into()).collect(),
             uv: None,
         };
         Mesh::new(raw).unwrap().0
+    }
+
+    /// Two k×k panels side by side (patches "left" and "right" when `seam`), flat on their
+    /// boundaries and at height `z` inside.
+    fn two_panels_with(k: u32, seam: bool, z: impl Fn(u32, u32) -> f64) -> Mesh {
+        let at = |i: u32, j: u32| {
+            let inside = i % k != 0 && j % k != 0;
+            [i as f64, j as f64, if inside { z(i, j) } else { 0.0 }]
+        };
+        let patch = |i: u32, _| u32::from(seam && i >= k);
+        grid((2 * k + 1, k + 1), at, patch, &["left", "right"])
     }
 
     #[test]
@@ -436,32 +446,13 @@ mod tests {
     /// lifted by a pseudo-random 0–0.2, so that there is something to solve.
     fn bow_tie_panels() -> Mesh {
         let w = 8u32;
-        let positions = (0..w * w)
-            .map(|i| {
-                let (x, y) = ((i % w) as f64, (i / w) as f64);
-                [x, y, 0.05 * ((i * 7) % 5) as f64]
-            })
-            .collect();
-        let mut triangles = Vec::new();
-        let mut face_patch = Vec::new();
-        for j in 0..w - 1 {
-            for i in 0..w - 1 {
-                let a = j * w + i;
-                triangles.push([a, a + 1, a + w + 1]);
-                triangles.push([a, a + w + 1, a + w]);
-                let b = ((1..3).contains(&i) && (1..3).contains(&j))
-                    || ((3..5).contains(&i) && (3..5).contains(&j));
-                face_patch.extend([u32::from(b); 2]);
-            }
-        }
-        let raw = RawMesh {
-            positions,
-            triangles,
-            face_patch,
-            patch_names: vec!["a".into(), "b".into()],
-            uv: None,
+        let at = |i: u32, j: u32| [i as f64, j as f64, 0.05 * (((j * w + i) * 7) % 5) as f64];
+        let patch = |i: u32, j: u32| {
+            let b = ((1..3).contains(&i) && (1..3).contains(&j))
+                || ((3..5).contains(&i) && (3..5).contains(&j));
+            u32::from(b)
         };
-        Mesh::new(raw).unwrap().0
+        grid((w, w), at, patch, &["a", "b"])
     }
 
     #[test]
