@@ -10,6 +10,7 @@ pub mod algorithms;
 pub mod corpus;
 pub mod cost;
 pub mod fixtures;
+pub mod fuzzing;
 pub mod geometry;
 pub mod io;
 pub mod jobs;

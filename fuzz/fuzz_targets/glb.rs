@@ -1,8 +1,8 @@
 //! The GLB reader on arbitrary bytes, within a small triangle limit: it must return a mesh
 //! or an error, never panic, and a mesh it returns must validate and write back.
+//! The checks are flatmesh::fuzzing::glb, which `cargo test` also replays on the corpus.
 #![no_main]
 
-use flatmesh::io::{self, Format, Limits};
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(
@@ -10,13 +10,5 @@ fuzz_target!(
     // and reports an error. libFuzzer's hook would abort on the caught panic: keep it for
     // every other panic only.
     init: flatmesh::io::install_quiet_panic_hook(),
-    |data: &[u8]| {
-    let limits = Limits {
-        max_triangles: 100_000,
-    };
-    if let Ok((mesh, _)) = io::load_limited(data, Format::Glb, &limits) {
-        let _ = flatmesh::report::Report::compute(&mesh, &[]);
-        let _ = io::gltf::write_glb(&mesh, None);
-    }
-    }
+    |data: &[u8]| flatmesh::fuzzing::glb(data)
 );

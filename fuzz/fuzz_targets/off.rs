@@ -1,16 +1,8 @@
 //! The OFF reader on arbitrary bytes, within a small triangle limit: it must return a mesh
 //! or an error, never panic, and a mesh it returns must validate and write back.
+//! The checks are flatmesh::fuzzing::off, which `cargo test` also replays on the corpus.
 #![no_main]
 
-use flatmesh::io::{self, Format, Limits};
 use libfuzzer_sys::fuzz_target;
 
-fuzz_target!(|data: &[u8]| {
-    let limits = Limits {
-        max_triangles: 100_000,
-    };
-    if let Ok((mesh, _)) = io::load_limited(data, Format::Off, &limits) {
-        let _ = flatmesh::report::Report::compute(&mesh, &[]);
-        let _ = io::gltf::write_glb(&mesh, None);
-    }
-});
+fuzz_target!(|data: &[u8]| flatmesh::fuzzing::off(data));
