@@ -1,7 +1,7 @@
 //! Procedural meshes with known answers, for tests, benchmarks and first runs.
 //!
 //! `flatmesh fixtures DIR` writes them as OBJ; the committed copies in `fixtures/` are checked
-//! byte for byte against this generator (tests/fixtures.rs), so a change here shows up as a
+//! byte for byte against this generator (tests/engine/fixtures.rs), so a change here shows up as a
 //! diff to review rather than silently changing what other tests measure.
 //!
 //! The developable ones are built so that developability holds exactly, not approximately:
@@ -70,7 +70,7 @@ pub fn readme() -> String {
     let mut s = String::from(
         "# Fixtures\n\n\
          Procedural meshes with known answers, written by `flatmesh fixtures fixtures` from\n\
-         `src/fixtures.rs`. Do not edit by hand: tests/fixtures.rs checks that these files are\n\
+         `src/fixtures.rs`. Do not edit by hand: tests/engine/fixtures.rs checks that these files are\n\
          exactly what the generator writes. Lengths are in the mesh's own units.\n\n\
          | name | vertices | faces | patches | χ | boundary loops | developable | what it is |\n\
          |---|---|---|---|---|---|---|---|\n",

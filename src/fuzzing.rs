@@ -1,5 +1,5 @@
 //! What each fuzz target (`fuzz/fuzz_targets/`) checks on one input, here so that the same
-//! checks replay the committed corpora in `cargo test` (tests/fuzz_corpus.rs) without a
+//! checks replay the committed corpora in `cargo test` (tests/engine/fuzz_corpus.rs) without a
 //! libFuzzer build. Each returns normally or panics; a panic is the finding.
 
 use crate::io::{self, Format, Limits};

@@ -230,7 +230,7 @@ pub fn corner_angle_gradient(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> ([f64; 3]
 /// `(cot ξ + cot γ)/|pq|² (p − q) − (q₊ − q)/(|pq||q₊q| sin ξ) − (q₋ − q)/(|pq||q₋q| sin γ)`
 /// (Eq. 13), and for q itself the 1/sin terms cancel (Appendix B), leaving
 /// `Σ (cot ξ + cot γ)/|pq|² (p − q)`. Eq. 12 as printed divides by |pq| only; Appendix B's
-/// derivation and finite differences (tests/gradients.rs) both give |pq|².
+/// derivation and finite differences (tests/engine/gradients.rs) both give |pq|².
 pub fn theta_gradient(mesh: &Mesh, q: u32, out: &mut Vec<(u32, [f64; 3])>) {
     theta_gradient_with(mesh, mesh.positions(), q, out)
 }

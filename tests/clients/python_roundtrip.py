@@ -1,6 +1,6 @@
 """The round trip an integrator makes with a Python client generated from openapi.yaml
 (openapi-python-client): upload OBJ, GLB and multipart meshes, submit every kind (JSON and
-multipart), poll, download every format, cancel, and read problems. Run by tests/clients.rs
+multipart), poll, download every format, cancel, and read problems. Run by tests/api/clients.rs
 as `python python_roundtrip.py GENERATED_DIR BASE_URL FIXTURES_DIR`; exits non-zero with a
 message at the first thing that does not work.
 """

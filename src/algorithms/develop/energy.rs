@@ -8,7 +8,7 @@
 //! implicit and G0 continuity is exact. ∂G/∂v is exact (Props. 1–2 of the FL paper through
 //! [`corner_angle_gradient`]), not the central differences of Eq. 12, which is the same
 //! quantity (G_P is the part of G that depends on v) computed approximately. Gradients are
-//! checked against central differences in tests/develop.rs.
+//! checked against central differences in tests/engine/develop.rs.
 
 use crate::geometry::corner_angle_gradient;
 use crate::mesh::{dot, sub, Mesh};

@@ -1,5 +1,5 @@
 //! The behaviour of [`Store`] as an executable suite: every backend runs [`check`] against a
-//! fresh, empty store (tests/store_contract.rs: SQLite and PostgreSQL). It covers the index
+//! fresh, empty store (tests/api/store_contract.rs: SQLite and PostgreSQL). It covers the index
 //! and blob operations the service uses, then the coordination contract. `open` gives a
 //! second handle on the same store, as a second process would have, so that "exactly once"
 //! is checked across handles.

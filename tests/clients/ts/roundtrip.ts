@@ -1,6 +1,6 @@
 // The round trip an integrator makes with a TypeScript client generated from openapi.yaml
 // (openapi-typescript types, openapi-fetch at run time): type-checked by tsc, then run by
-// tests/clients.rs as `node out/roundtrip.js BASE_URL FIXTURES_DIR`. Exits non-zero with a
+// tests/api/clients.rs as `node out/roundtrip.js BASE_URL FIXTURES_DIR`. Exits non-zero with a
 // message at the first thing that does not work.
 import fs from "node:fs";
 import createClient from "openapi-fetch";

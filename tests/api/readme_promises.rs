@@ -4,7 +4,7 @@
 //! mesh's warnings on the job, `?format=off`, refused callback targets, keys and CORS origins
 //! from the environment, the client's `--api-key`, and `--request-timeout`.
 
-mod common;
+use crate::common;
 
 use common::*;
 use serde_json::{json, Value};

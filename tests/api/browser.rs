@@ -6,9 +6,9 @@
 //! Measured: Chromium 148 also lets the call through with the old `Access-Control-Allow-
 //! Headers: *` (it does not yet enforce the Fetch rule that `*` never covers
 //! `Authorization`; Firefox and Safari do), so the names themselves are checked by the
-//! preflight assertions of tests/service.rs::api_keys.
+//! preflight assertions of tests/api/service.rs::api_keys.
 
-mod common;
+use crate::common;
 
 use common::*;
 use std::io::{Read, Write};

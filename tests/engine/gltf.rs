@@ -971,7 +971,7 @@ fn every_shared_mesh_round_trips_through_glb() {
     for line in manifest.lines().skip(1) {
         let file = line.split('\t').next().unwrap();
         let Ok((mesh, _)) = io::load_path(&root.join(file)) else {
-            continue; // refused meshes are covered by tests/shared_meshes.rs
+            continue; // refused meshes are covered by tests/engine/shared_meshes.rs
         };
         let varpi = geometry::flattenability(&mesh, &geometry::angle_sums(&mesh));
         let bytes = gltf::write_glb(&mesh, Some(&varpi));

@@ -3,7 +3,7 @@
 //! for several processes) and PostgreSQL (a throwaway cluster; several pools on one
 //! database).
 
-mod common;
+use crate::common;
 
 use common::pg::PgCluster;
 use flatmesh::service::store::{PgStore, SqliteStore, Store};

@@ -5,7 +5,7 @@
 //! every job ends once, succeeded, with the same status, attempts and results through every
 //! replica. Each test starts a throwaway PostgreSQL cluster (tests/common/pg.rs).
 
-mod common;
+use crate::common;
 
 use common::pg::PgCluster;
 use common::*;

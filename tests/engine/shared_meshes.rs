@@ -205,7 +205,7 @@ fn shared_mesh_topology_matches_the_manifest() {
         let f: Vec<&str> = line.split('\t').collect();
         let file = f[col("file")];
         // Non-manifold edges are refused and bow-tie vertices split by the reader (tested in
-        // tests/validation.rs), so the manifest's counts do not apply to those files.
+        // tests/engine/validation.rs), so the manifest's counts do not apply to those files.
         if f[col("nonmanifold_edges")] != "0" || f[col("nonmanifold_vertices")] != "0" {
             continue;
         }

@@ -3,7 +3,7 @@
 //! kept: finished results download unchanged, a job the old process was running when it
 //! stopped runs again, a queued job runs.
 
-mod common;
+use crate::common;
 
 use common::*;
 use serde_json::json;

@@ -1,7 +1,7 @@
 //! Black-box tests of `flatmesh serve`: the real binary on a random loopback port, spoken to
 //! with reqwest. Every JSON body seen is validated against the schemas of openapi.yaml.
 
-mod common;
+use crate::common;
 
 use base64::Engine;
 use common::*;
@@ -415,10 +415,10 @@ async fn meshes_upload_report_delete() {
 /// Every kind of the registry has its own end-to-end test below, named `{kind}_job_end_to_end`.
 #[test]
 fn every_kind_has_an_end_to_end_test() {
-    let src = std::fs::read_to_string("tests/service.rs").unwrap();
+    let src = std::fs::read_to_string("tests/api/service.rs").unwrap();
     for k in flatmesh::jobs::Kind::ALL {
         let name = format!("async fn {}_job_end_to_end()", k.name().replace('-', "_"));
-        assert!(src.contains(&name), "no `{name}` in tests/service.rs");
+        assert!(src.contains(&name), "no `{name}` in tests/api/service.rs");
     }
 }
 

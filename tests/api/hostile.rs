@@ -1,7 +1,7 @@
 //! Hostile input and operation (issue 20), black box: a real `flatmesh serve` and what an
 //! attacker or a careless operator would send it.
 
-mod common;
+use crate::common;
 
 use common::*;
 use serde_json::json;

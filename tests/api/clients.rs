@@ -6,7 +6,7 @@
 //! `npm ci` in tests/clients/ts); without them a test says so and skips, except under
 //! `CI=true`, where that is a failure.
 
-mod common;
+use crate::common;
 
 use common::*;
 use std::path::{Path, PathBuf};

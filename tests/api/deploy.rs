@@ -3,7 +3,7 @@
 //! them, probes on the service's real health routes, and every FLATMESH_* variable a real
 //! flag of `flatmesh serve`.
 
-mod common;
+use crate::common;
 
 use serde_yaml::Value;
 use std::collections::{BTreeMap, BTreeSet};
