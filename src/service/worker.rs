@@ -39,7 +39,8 @@ pub struct Limits {
 /// In-memory state of a job running in this process.
 #[derive(Debug, Default)]
 pub struct Live {
-    /// Set by a cancel (here, or seen in a heartbeat), a lost lease or the time limit.
+    /// Set by a cancel (here, or seen in a heartbeat), a delete or a lost lease; the time limit
+    /// is [`JobControl::timed_out`].
     pub cancel: AtomicBool,
     /// Latest progress (JSON object), read by status polls here and written to the store by
     /// the next heartbeat.
@@ -613,6 +614,15 @@ impl Executor {
         Option<serde_json::Value>,
     ) {
         match result {
+            // Optional stages that keep what came before when stopped (fl-mesh's detour,
+            // restarts, part retries and remeshing) end Ok after a cancel; the client's cancel
+            // still wins, and what the run wrote goes.
+            Ok(Ok(_)) if control.live.cancel.load(Ordering::Relaxed) => {
+                if let Err(e) = self.store.delete_blobs(&format!("jobs/{}", job.id)) {
+                    tracing::error!(job = %job.id, error = %e, "cannot delete a cancelled job's files");
+                }
+                (Status::Cancelled, None, vec![], None)
+            }
             Ok(Ok((artifacts, outcome))) => (Status::Succeeded, None, artifacts, Some(outcome)),
             Ok(Err(ExecError::Algo(AlgoError::Cancelled))) => {
                 if let Some(at) = control.timed_out() {
@@ -844,6 +854,26 @@ mod tests {
         spec.run(input, control)
     }
 
+    /// Whether [`ignores_cancel`] waits for a stop before it runs the job.
+    static WAIT_FOR_STOP: AtomicBool = AtomicBool::new(true);
+
+    /// Runs a job the way fl-mesh's optional stages end when stopped: it waits for the stop,
+    /// then does its work anyway and returns it.
+    fn ignores_cancel(
+        spec: &JobSpec,
+        input: &Input,
+        control: &dyn Control,
+    ) -> Result<JobOutcome, AlgoError> {
+        let t = Instant::now();
+        while WAIT_FOR_STOP.load(Ordering::Relaxed)
+            && !control.cancelled()
+            && t.elapsed() < Duration::from_secs(30)
+        {
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        spec.run(input, &crate::algorithms::Silent::default())
+    }
+
     fn job(id: &str, mesh_id: &str, boom: bool) -> JobRecord {
         let kind = if boom { "fl-mesh" } else { "report" };
         JobRecord::queued(id, kind, mesh_id, now_ms())
@@ -864,23 +894,11 @@ mod tests {
         }
     }
 
-    /// A panic inside an algorithm fails that job with a 500 problem; the pool keeps working.
-    #[test]
-    fn panic_fails_the_job_and_the_pool_survives() {
-        let dir = std::env::temp_dir().join(format!("flatmesh-exec-{}", std::process::id()));
+    /// A store in a fresh directory with `fixtures/flat_disk.obj` uploaded as mesh `m1`.
+    fn store_with_disk(name: &str) -> (Arc<dyn Store>, std::path::PathBuf) {
+        let dir = std::env::temp_dir().join(format!("flatmesh-{name}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         let store: Arc<dyn Store> = Arc::new(SqliteStore::open(&dir).unwrap());
-        let metrics = Arc::new(Metrics::default());
-        let limits = Limits {
-            workers: 1,
-            max_queued: 4,
-            time_limit: Duration::from_secs(60),
-            retention: Duration::from_secs(60),
-            max_attempts: 3,
-            nice: 10,
-            lease: Duration::from_secs(5),
-        };
-        let exec = Executor::with_runner(store.clone(), limits, metrics, runner).unwrap();
         let obj = std::fs::read("fixtures/flat_disk.obj").unwrap();
         store.put_blob("meshes/m1", &obj).unwrap();
         store
@@ -894,6 +912,58 @@ mod tests {
                 tenant: String::new(),
             })
             .unwrap();
+        (store, dir)
+    }
+
+    fn limits() -> Limits {
+        Limits {
+            workers: 1,
+            max_queued: 4,
+            time_limit: Duration::from_secs(60),
+            retention: Duration::from_secs(60),
+            max_attempts: 3,
+            nice: 10,
+            lease: Duration::from_secs(5),
+        }
+    }
+
+    /// A client's cancel ends a running job `cancelled`, with no results, even when its run
+    /// returns a result after the stop (as fl-mesh's optional stages do).
+    #[test]
+    fn a_cancel_wins_over_a_run_that_returns_a_result() {
+        let (store, dir) = store_with_disk("exec-cancel");
+        let metrics = Arc::new(Metrics::default());
+        let exec = Executor::with_runner(store.clone(), limits(), metrics, ignores_cancel).unwrap();
+        store.insert_job(&job("j1", "m1", false)).unwrap();
+        exec.enqueued();
+        let t = Instant::now();
+        while store.get_job("j1").unwrap().unwrap().status != Status::Running {
+            assert!(t.elapsed() < Duration::from_secs(30), "j1 never ran");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        assert!(matches!(exec.cancel("j1"), Ok(Some(Ok(_)))));
+        let j1 = wait_end(store.as_ref(), "j1");
+        assert_eq!(j1.status, Status::Cancelled, "{:?}", j1.error);
+        assert!(j1.artifacts.is_empty(), "{:?}", j1.artifacts);
+        assert!(j1.outcome.is_none());
+        assert_eq!(store.get_blob("jobs/j1/report.json").unwrap(), None);
+        // Without a cancel the same runner's job succeeds with its files.
+        WAIT_FOR_STOP.store(false, Ordering::Relaxed);
+        store.insert_job(&job("j2", "m1", false)).unwrap();
+        exec.enqueued();
+        let j2 = wait_end(store.as_ref(), "j2");
+        assert_eq!(j2.status, Status::Succeeded, "{:?}", j2.error);
+        assert!(j2.artifacts.iter().any(|a| a == "report.json"));
+        assert!(store.get_blob("jobs/j2/report.json").unwrap().is_some());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// A panic inside an algorithm fails that job with a 500 problem; the pool keeps working.
+    #[test]
+    fn panic_fails_the_job_and_the_pool_survives() {
+        let (store, dir) = store_with_disk("exec");
+        let metrics = Arc::new(Metrics::default());
+        let exec = Executor::with_runner(store.clone(), limits(), metrics, runner).unwrap();
         for (id, boom) in [("j1", true), ("j2", false)] {
             store.insert_job(&job(id, "m1", boom)).unwrap();
             assert!(exec.has_room());
