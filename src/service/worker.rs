@@ -616,8 +616,12 @@ impl Executor {
         match result {
             // Optional stages that keep what came before when stopped (fl-mesh's detour,
             // restarts, part retries and remeshing) end Ok after a cancel; the client's cancel
-            // still wins, and what the run wrote goes.
-            Ok(Ok(_)) if control.live.cancel.load(Ordering::Relaxed) => {
+            // still wins, and what the run wrote goes. Not after a lost lease: the job (and its
+            // files) may be another worker's by now, and this result is dropped anyway.
+            Ok(Ok(_))
+                if control.live.cancel.load(Ordering::Relaxed)
+                    && !control.live.lost.load(Ordering::Relaxed) =>
+            {
                 if let Err(e) = self.store.delete_blobs(&format!("jobs/{}", job.id)) {
                     tracing::error!(job = %job.id, error = %e, "cannot delete a cancelled job's files");
                 }
