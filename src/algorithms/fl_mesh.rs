@@ -790,7 +790,7 @@ pub fn run(
             }
         }
     }
-    let hausdorff_to_input = super::Distance::hausdorff(&out, mesh);
+    let hausdorff_to_input = super::Distance::hausdorff_reported(&out, mesh, control);
     Ok(Outcome {
         mesh: Some(out),
         patterns: None,

@@ -378,7 +378,7 @@ pub fn run(
         levels.push(out.clone());
         current = out;
     }
-    summary.hausdorff_to_input = super::Distance::hausdorff(&current, mesh);
+    summary.hausdorff_to_input = super::Distance::hausdorff_reported(&current, mesh, control);
     Ok(Outcome {
         mesh: Some(current),
         patterns: None,

@@ -31,7 +31,7 @@ pub use local::{t_and_slope, vertex_normals_unweighted};
 pub use loop_subdivision::loop_subdivide;
 
 use super::bad_param as bad;
-use super::{AlgoError, Control, Distance, Outcome};
+use super::{AlgoError, Control, Distance, Outcome, Progress};
 use crate::mesh::Mesh;
 use energy::{big_g, g_max, Model};
 use serde::{Deserialize, Serialize};
@@ -559,6 +559,13 @@ pub fn run(
             unfolded = Some(u);
         }
     }
+    // summarise measures the distance to the input, which can take seconds.
+    control.progress(&Progress {
+        stage: "distance to input".into(),
+        iteration: 0,
+        max_flattenability: None,
+        step_norm: None,
+    });
     let mut summary = summarise(mesh, &levels, &start, &out, &model, &run, params);
     summary.unfold = unfolded;
     Ok(Outcome {

@@ -373,7 +373,7 @@ pub fn run(
             .filter(|&(v, &s)| mesh.conn().is_interior(v as u32) && s < params.clearance - 1e-6 * h)
             .count()
     });
-    let hausdorff_to_input = Distance::hausdorff(&out, mesh);
+    let hausdorff_to_input = Distance::hausdorff_reported(&out, mesh, control);
     let (_, before) = local::varpi(mesh, mesh.positions());
     let (w, _) = local::varpi(&out, out.positions());
     let mut stuck_vertices: Vec<u32> = (0..w.len() as u32)

@@ -451,7 +451,7 @@ pub fn run(
             (face_charts, m, map, Some(report))
         }
     };
-    let hausdorff_to_input = super::Distance::hausdorff(&cut_mesh, input);
+    let hausdorff_to_input = super::Distance::hausdorff_reported(&cut_mesh, input, control);
     let mut flat = flatten::run(&cut_mesh, &final_flatten, control)?;
     let mut cut_mesh = cut_mesh;
     if let Some(patterns) = flat.patterns.as_mut() {
