@@ -43,6 +43,27 @@ fn routes_and_openapi_agree() {
 /// Every kind of the registry has its parameter schema in openapi.yaml (through `KindParams`),
 /// and the defaults it documents are the code's: the kind's parameters parsed from `{}`,
 /// serialised, have exactly the schema's properties, each with the documented default.
+/// The schema check that every other test relies on accepts a valid body and rejects what
+/// openapi.yaml forbids, so a body that drifts from the spec cannot pass unseen.
+#[test]
+fn the_openapi_check_rejects_bodies_the_schema_forbids() {
+    let problem =
+        json!({"type": "http://x/problems/bad", "title": "Bad", "status": 400, "detail": "d"});
+    common::check("Problem", &problem);
+    let mut without_status = problem.clone();
+    without_status.as_object_mut().unwrap().remove("status");
+    let bad = [
+        without_status,
+        json!({"type": "t", "title": "Bad", "status": "400", "detail": "d"}),
+        json!({"type": "t", "title": "Bad", "status": 200, "detail": "d"}),
+        json!(["not", "an", "object"]),
+    ];
+    for b in bad {
+        let caught = std::panic::catch_unwind(|| common::check("Problem", &b));
+        assert!(caught.is_err(), "accepted {b}");
+    }
+}
+
 #[test]
 fn openapi_parameter_defaults_are_the_code_defaults() {
     use flatmesh::jobs::{JobSpec, Kind};
