@@ -57,7 +57,7 @@ fn budgets() -> Vec<(&'static str, Params)> {
             "global_sqp_10_iterations",
             Params {
                 max_iterations: 10,
-                restore: false,
+                restore: Some(false),
                 ..p(Method::Global, Solver::Sqp)
             },
         ),

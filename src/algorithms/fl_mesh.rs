@@ -1059,7 +1059,7 @@ fn detour(
     }
     let sqp = super::develop::Params {
         fix_boundary: true,
-        restore: false,
+        restore: Some(false),
         unfold: false,
         tolerance: Some(params.tolerance),
         // Its own budget, as each retry's, within develop's default.

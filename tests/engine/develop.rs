@@ -915,7 +915,7 @@ fn sqp_on_a_shoe_is_made_flattenable_by_the_restoration() {
         return;
     };
     let alone = Params {
-        restore: false,
+        restore: Some(false),
         ..Params::default()
     };
     let out = develop::run(&mesh, &alone, &Silent::default()).unwrap();
@@ -955,7 +955,7 @@ fn an_unconverged_restoration_that_got_lower_is_a_start_for_the_sqp() {
         return;
     };
     let alone = Params {
-        restore: false,
+        restore: Some(false),
         ..Params::default()
     };
     let first = develop::run(&mesh, &alone, &Silent::default()).unwrap();
@@ -967,7 +967,7 @@ fn an_unconverged_restoration_that_got_lower_is_a_start_for_the_sqp() {
     let out = develop::run(&mesh, &Params::default(), &Silent::default()).unwrap();
     let (s, m) = flattenable_through_the_restoration(out);
     assert!(
-        s.stop_detail.contains("lower than the SQP's"),
+        s.stop_detail.contains("lower than the first run's"),
         "{}",
         s.stop_detail
     );
@@ -989,6 +989,44 @@ fn a_second_restoration_round_from_the_result_so_far_finishes_a_whole_suit() {
         "{}",
         s.stop_detail
     );
+}
+
+/// The same pouch through the paper's penalty (`penalty_cg`), whose phases stall on it like the
+/// SQP's steps: by default (`restore` none) the penalty runs alone, as the paper's; with
+/// `restore = true` the restoration gives it a flattenable start, which is within its
+/// tolerance, so the result is flattenable (angles recomputed) with the opening bit-identical.
+#[test]
+fn the_penalty_is_restored_only_when_asked() {
+    let mesh = flatmesh::corpus::pouch(16);
+    let alone = Params {
+        fix_boundary: true,
+        solver: Solver::PenaltyCg,
+        ..Params::default()
+    };
+    let out = develop::run(&mesh, &alone, &Silent::default()).unwrap();
+    let s = &out.summary;
+    let g_alone = g_max_independent(&out.mesh.unwrap());
+    assert!(
+        g_alone > 1e-3 && !s.converged,
+        "{g_alone}: pick another pouch"
+    );
+    assert!(!s.stop_detail.contains("restoration"), "{}", s.stop_detail);
+    let p = Params {
+        restore: Some(true),
+        ..alone
+    };
+    let out = develop::run(&mesh, &p, &Silent::default()).unwrap();
+    let (s, m) = flattenable_through_the_restoration(out);
+    assert!(
+        s.stop_detail.starts_with("penalty_cg: "),
+        "{}",
+        s.stop_detail
+    );
+    for v in 0..mesh.num_vertices() as u32 {
+        if !mesh.conn().is_interior(v) {
+            assert_eq!(m.position(v), mesh.position(v), "boundary vertex {v}");
+        }
+    }
 }
 
 /// A pouch with its opening held (`fix_boundary`): its area is 11 times what any flat disk

@@ -119,11 +119,12 @@ pub struct Params {
     pub step_tolerance: f64,
     /// `sqp`: iterations without g_max halving that end an unflattenable run.
     pub stall_iterations: usize,
-    /// `sqp`: when the run stalls unflattenable (not when `max_iterations` ends it), restore
-    /// feasibility with `fl-mesh` from the input (boundary fixed, no refinement), then run
-    /// again from its result; up to three rounds (`RESTORE_ROUNDS`), the later ones from the result
-    /// so far.
-    pub restore: bool,
+    /// `global`/`loop`: when the run stalls unflattenable (not when `max_iterations` ends it),
+    /// restore feasibility with `fl-mesh` from the input (boundary fixed, no refinement), then
+    /// run the same solver again from its result; up to three rounds (`RESTORE_ROUNDS`), the
+    /// later ones from the result so far. None: on for `sqp`, off for `penalty_cg` (the
+    /// paper's method alone).
+    pub restore: Option<bool>,
     /// `local`: largest offset δ_T along a normal, mesh units; none: the mean edge length L̄.
     pub delta_t: Option<f64>,
     /// `local`: most heap pops (N_max).
@@ -158,7 +159,7 @@ impl Default for Params {
             smoothness: 10.0,
             step_tolerance: 1e-4,
             stall_iterations: 40,
-            restore: true,
+            restore: None,
             delta_t: None,
             max_moves: 500_000,
             update: Update::GaussNewton,
@@ -171,6 +172,11 @@ impl Default for Params {
 }
 
 impl Params {
+    /// Whether a stalled `global`/`loop` run is restored (see `restore`).
+    pub fn restores(&self) -> bool {
+        self.restore.unwrap_or(self.solver == Solver::Sqp)
+    }
+
     /// The tolerance in force.
     pub fn tolerance(&self) -> f64 {
         self.tolerance.unwrap_or(match self.method {
@@ -528,26 +534,23 @@ pub fn run(
         .collect();
     let run = match (params.method, params.solver) {
         (Method::Local, _) => local::run(&model, start.positions(), params, control)?,
-        (_, Solver::Sqp) => {
-            let first = sqp::run(
-                &model,
-                start.positions(),
-                start.positions(),
-                &movable,
-                params,
-                control,
-            )?;
+        (_, solver) => {
+            // The solver from `from`, E and closeness measured from the input as always.
+            let solve = |from: &[[f64; 3]], control: &dyn Control| match solver {
+                Solver::Sqp => sqp::run(&model, start.positions(), from, &movable, params, control),
+                Solver::PenaltyCg => cg::run(&model, from, &movable, params, control),
+            };
+            let first = solve(start.positions(), control)?;
             // Only a stall: a run cut short by `max_iterations` was given its budget.
             if first.g_max <= params.tolerance()
-                || !params.restore
+                || !params.restores()
                 || first.stop == Stop::MaxIterations
             {
                 first
             } else {
-                restore_rounds(&model, &start, first, &movable, params, control)?
+                restore_rounds(&start, first, params, &solve, control)?
             }
         }
-        (_, Solver::PenaltyCg) => cg::run(&model, start.positions(), &movable, params, control)?,
     };
     let mut out = start
         .with_positions(run.positions.clone())
@@ -644,16 +647,18 @@ fn open_new_folds(
 /// 1.1e-2, the third to 5.7e-3.
 const RESTORE_ROUNDS: usize = 3;
 
+/// The solver of a `global`/`loop` run, started from the given positions.
+type Solve<'a> = dyn Fn(&[[f64; 3]], &dyn Control) -> Result<Run, AlgoError> + 'a;
+
 /// [`restore`] in up to [`RESTORE_ROUNDS`] rounds, the first from the input.
 fn restore_rounds(
-    model: &Model<'_>,
     start: &Mesh,
     first: Run,
-    movable: &[bool],
     params: &Params,
+    solve: &Solve<'_>,
     control: &dyn Control,
 ) -> Result<Run, AlgoError> {
-    let mut run = restore(model, start, start, first, movable, params, control)?;
+    let mut run = restore(start, start, first, params, solve, control)?;
     for _ in 1..RESTORE_ROUNDS {
         if run.g_max <= params.tolerance() || run.stop == Stop::MaxIterations {
             break;
@@ -662,7 +667,7 @@ fn restore_rounds(
             .with_positions(run.positions.clone())
             .map_err(|e| AlgoError::Input(format!("the optimised mesh is invalid: {e}")))?;
         let before = run.g_max;
-        run = restore(model, start, &from, run, movable, params, control)?;
+        run = restore(start, &from, run, params, solve, control)?;
         if run.g_max >= before {
             break;
         }
@@ -670,8 +675,9 @@ fn restore_rounds(
     Ok(run)
 }
 
-/// The feasibility restoration after an `sqp` run that stalled unflattenable (beyond the
-/// paper; the issue's "feasibility-restoration phase"): fl-mesh, whose globalisation
+/// The feasibility restoration after a run that stalled unflattenable (beyond the paper; the
+/// issue's "feasibility-restoration phase"), written for `sqp` and used by `penalty_cg` too
+/// when asked (`restore`): fl-mesh, whose globalisation
 /// (non-monotone steps, retries, the developable cone) reaches θ = 2π where the SQP's
 /// monotone Levenberg–Marquardt steps stall with every vertex at a similar g, is run from
 /// the input with the boundary fixed and without refinement (the vertex set must stay E's);
@@ -688,12 +694,11 @@ fn restore_rounds(
 /// the restoration ends no lower, or the run from its result ends no lower than the first, the
 /// first run is returned and the detail says so.
 fn restore(
-    model: &Model<'_>,
     start: &Mesh,
     from: &Mesh,
     first: Run,
-    movable: &[bool],
     params: &Params,
+    solve: &Solve<'_>,
     control: &dyn Control,
 ) -> Result<Run, AlgoError> {
     use super::fl_mesh;
@@ -758,12 +763,8 @@ fn restore(
             ..first
         });
     }
-    let second = sqp::run(
-        model,
-        start.positions(),
+    let second = solve(
         flat.positions(),
-        movable,
-        params,
         &super::Renamed::after(control, "after restoration"),
     )?;
     // Never worse: fl-mesh's ϖ and E's g are measured by different code, so a start at the
@@ -790,18 +791,19 @@ fn restore(
         format!("flattenable in {} iterations", report.iterations)
     } else {
         format!(
-            "ϖ_max {:.2e} in {} iterations, lower than the SQP's ({})",
+            "ϖ_max {:.2e} in {} iterations, lower than the first run's ({})",
             report.max_flattenability, report.iterations, report.stop_reason
         )
     };
     // A later round's first run is the earlier rounds, already named.
-    let first_said = match first_said.strip_prefix("sqp: ") {
+    let name = solver_name(params.solver);
+    let first_said = match first_said.strip_prefix(&format!("{name}: ")) {
         Some(rest) => rest.to_string(),
         None => first_said,
     };
     let stop_detail = format!(
-        "sqp: {} at g_max {:.2e}; fl-mesh restoration from {origin} (boundary fixed, no \
-         refinement): {restored}; sqp from there: {}",
+        "{name}: {} at g_max {:.2e}; fl-mesh restoration from {origin} (boundary fixed, no \
+         refinement): {restored}; {name} from there: {}",
         first_said,
         first.g_max,
         if second.stop_detail.is_empty() {
@@ -820,6 +822,14 @@ fn restore(
         g_max_input: first.g_max_input,
         ..second
     })
+}
+
+/// The solver's name as in the parameters.
+fn solver_name(solver: Solver) -> &'static str {
+    match solver {
+        Solver::Sqp => "sqp",
+        Solver::PenaltyCg => "penalty_cg",
+    }
 }
 
 /// The figures, measured on the meshes (not taken from the solver).
