@@ -193,13 +193,19 @@ impl Distance {
     /// 60k-spoke fan) its closest-point queries take seconds that would otherwise show as the
     /// previous stage standing still.
     pub fn hausdorff_reported(output: &Mesh, input: &Mesh, control: &dyn Control) -> Distance {
+        Self::report_stage(control);
+        Self::hausdorff(output, input)
+    }
+
+    /// The progress stage of [`Distance::hausdorff_reported`], for a caller that measures the
+    /// distance inside a summary of its own.
+    pub fn report_stage(control: &dyn Control) {
         control.progress(&Progress {
             stage: "distance to input".into(),
             iteration: 0,
             max_flattenability: None,
             step_norm: None,
         });
-        Self::hausdorff(output, input)
     }
 }
 

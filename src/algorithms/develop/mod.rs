@@ -31,7 +31,7 @@ pub use local::{t_and_slope, vertex_normals_unweighted};
 pub use loop_subdivision::loop_subdivide;
 
 use super::bad_param as bad;
-use super::{AlgoError, Control, Distance, Outcome, Progress};
+use super::{AlgoError, Control, Distance, Outcome};
 use crate::mesh::Mesh;
 use energy::{big_g, g_max, Model};
 use serde::{Deserialize, Serialize};
@@ -563,12 +563,7 @@ pub fn run(
         }
     }
     // summarise measures the distance to the input, which can take seconds.
-    control.progress(&Progress {
-        stage: "distance to input".into(),
-        iteration: 0,
-        max_flattenability: None,
-        step_norm: None,
-    });
+    Distance::report_stage(control);
     let mut summary = summarise(mesh, &levels, &start, &out, &model, &run, params);
     summary.unfold = unfolded;
     Ok(Outcome {
