@@ -46,6 +46,16 @@
 //! restoration stalls too (3.5e-2: each upper is a pouch that only a start from a cone
 //! flattens). The penalty has no shape guard: those results have corners below 0.01° and new
 //! folds (t-shirt 12), which the job's warnings report; `sqp` keeps every corner ≥ 1°.
+//!
+//! `restore = true` (off by default here) follows a stall with `sqp`'s feasibility restoration
+//! (fl-mesh from the input, then this solver from its result, `super::restore`). A
+//! flattenable start is within the tolerance, so the penalty returns it unchanged: the answer
+//! is fl-mesh's, and E is not lowered from there (the phases' ρ = Σl⁰²/(n_e G²) grows as
+//! 1/G² near such a start). With both options above it takes mh_shoes01 to 5.2e-7 (δS 66 %)
+//! and reaches 1e-6 on 17 of the 22 open shared meshes, as `sqp` does, with new folds on 9
+//! (issue 16 note, 2026-11-28). With the paper's schedule alone it takes the t-shirt from its
+//! stall at 0.22 to 1.3e-8 but crumpled (30 folds, δS 34 %): restoration does not replace the
+//! two options above where they converge.
 
 use super::energy::{big_g, g_max, Model};
 use super::sqp::{Kkt, REGULARISATION};
