@@ -676,16 +676,17 @@ fn restore_rounds(
 /// (non-monotone steps, retries, the developable cone) reaches θ = 2π where the SQP's
 /// monotone Levenberg–Marquardt steps stall with every vertex at a similar g, is run from
 /// the input with the boundary fixed and without refinement (the vertex set must stay E's);
-/// from its flattenable result the SQP runs again, now in its objective phase,
-/// lowering E + closeness along the constraints with v⁰ still the input. Any constraint point
-/// is as good a start as another for Eq. 8, so this changes where the SQP ends, not what it
-/// solves. `iterations` and `history` count both SQP runs (fl-mesh's own iterations are in
+/// from its flattenable result the same solver runs again (the SQP now in its objective
+/// phase, lowering E + closeness along the constraints; the penalty from a point already
+/// within its tolerance), with v⁰ still the input. Any constraint point
+/// is as good a start as another for Eq. 8, so this changes where the solver ends, not what it
+/// solves. `iterations` and `history` count both solver runs (fl-mesh's own iterations are in
 /// the detail); `best_iteration` is the first run's count when the restoration's result
 /// itself is returned (mh_shoes01: the SQP from it was stationary at once). From the input,
-/// not from the SQP's best iterate: that one is crumpled where the SQP stalled (mh_shoes01:
+/// not from the solver's best iterate: that one is crumpled where the SQP stalled (mh_shoes01:
 /// 128 folds, a corner of 0.002°), and fl-mesh from it stalled at 8.8e-4 where from the
 /// input it converges. A restoration that does not converge but ends below the first run's
-/// g_max is a start too (the SQP keeps its best iterate, so it ends there at worst). When
+/// g_max is a start too (the solver keeps its best iterate, so it ends there at worst). When
 /// the restoration ends no lower, or the run from its result ends no lower than the first, the
 /// first run is returned and the detail says so.
 fn restore(
