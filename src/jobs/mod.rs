@@ -209,7 +209,9 @@ impl Kind {
                  the penalty, with rho_growth 2 it reaches the constraint where the paper's \
                  stalls, no shape guard), delta_t (local: the mean edge \
                  length), max_moves (local: 500000), update=gauss_newton|newton (local: \
-                 gauss_newton), relaxation (local gauss_newton: 1.8), levels (loop: 1)"
+                 gauss_newton), relaxation (local gauss_newton: 1.8), min_gain (local \
+                 gauss_newton: 1e-2, a move must also lower G^2 by this share of its mean per \
+                 vertex; 0: no floor), levels (loop: 1)"
             }
             Kind::Segment => {
                 "vsa_tolerance (5e-4: largest chart L^{2,1} error over the total area), \

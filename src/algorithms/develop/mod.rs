@@ -133,6 +133,9 @@ pub struct Params {
     pub update: Update,
     /// `local`, `gauss_newton`: over-relaxation ω of each move, in (0, 2).
     pub relaxation: f64,
+    /// `local`, `gauss_newton`: a move must also lower G² = Σg² by this share of its mean
+    /// per interior vertex, G²/n (0: only its own T's 0.1 %; see the `local` module).
+    pub min_gain: f64,
     /// `loop`: Loop subdivision levels.
     pub levels: usize,
     /// Tolerances (radians) at which D[M] is reported.
@@ -164,6 +167,7 @@ impl Default for Params {
             max_moves: 500_000,
             update: Update::GaussNewton,
             relaxation: 1.8,
+            min_gain: 1e-2,
             levels: 1,
             d_tolerance: vec![1e-6, 1e-4, 1e-3, 1e-2],
             unfold: true,
@@ -224,6 +228,9 @@ impl Params {
         }
         if !(self.relaxation > 0.0 && self.relaxation < 2.0) {
             return Err(bad("relaxation", "must be in (0, 2)"));
+        }
+        if !(self.min_gain >= 0.0 && self.min_gain <= 1.0) {
+            return Err(bad("min_gain", "must be in [0, 1]"));
         }
         if !(1..=100_000_000).contains(&self.max_moves) {
             return Err(bad("max_moves", "must be in 1..=100000000"));
