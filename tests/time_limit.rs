@@ -53,10 +53,11 @@ async fn every_kind_ends_within_a_second_of_its_time_limit() {
         ("subdivide", json!({"levels": 1})),
         ("perturb", json!({})),
         ("develop", json!({"method": "global"})),
-        // 500000 moves take ~0.5 s here since they got cheaper: ten times as many.
+        // 500000 moves take ~0.5 s here since they got cheaper: ten times as many, and no
+        // min_gain floor, which could end the run stalled inside the limit.
         (
             "develop",
-            json!({"method": "local", "max_moves": 5_000_000}),
+            json!({"method": "local", "max_moves": 5_000_000, "min_gain": 0}),
         ),
         ("develop", json!({"method": "loop"})),
         ("segment", json!({})),
