@@ -38,10 +38,11 @@
 //! heap until a vertex within two rings of it moves (which changes its T); the paper would pop
 //! it again until N_max. The run stops when the heap's top is at most ε and the global
 //! max |g| is too (`tolerance`), when only stalled vertices are above ε (`stalled`, naming
-//! them; with `min_gain`, once a sweep over them moved none), or after `max_moves` pops. Seam and boundary vertices never move (Sec. 5.2); every
-//! output vertex is q⁰ + δ n_q with |δ| ≤ δ_T; a move that would make a triangle of the fan
-//! degenerate is refused (halved, like one that does not lower T). If the moves together made
-//! g_max worse (the paper's Newton update does on real garments), the input is returned.
+//! them; with `min_gain`, once a sweep over them moved none), or after `max_moves` pops. Seam
+//! and boundary vertices never move (Sec. 5.2); every output vertex is q⁰ + δ n_q with
+//! |δ| ≤ δ_T; a move that would make a triangle of the fan degenerate is refused (halved, like
+//! one that does not lower T). If the moves together made g_max worse (the paper's Newton
+//! update does on real garments), the input is returned.
 
 use super::energy::{g_max, Model};
 use super::{Params, Run, Stop, Update};
@@ -153,7 +154,7 @@ pub(super) fn run(
                 delta_t,
                 params.update,
                 params.relaxation,
-                floor_share * g2 / interior,
+                (floor_share * g2 / interior).max(0.0),
                 &mut scratch,
             )
         } else {
