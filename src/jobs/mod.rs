@@ -210,7 +210,7 @@ impl Kind {
                  stalls, no shape guard), delta_t (local: the mean edge \
                  length), max_moves (local: 500000), update=gauss_newton|newton (local: \
                  gauss_newton), relaxation (local gauss_newton: 1.8), min_gain (local \
-                 gauss_newton: 1e-2, a move must also lower G^2 by this share of its mean per \
+                 gauss_newton: 1e-2, a move must also lower G = sum g^2 by this share of its mean per \
                  vertex; 0: no floor), levels (loop: 1)"
             }
             Kind::Segment => {

@@ -18,12 +18,12 @@
 //!   1.5 stalled at 1.1e-4 after 102505, 1.8 reached 1e-4 in 919 (Newton: 674).
 //! - `newton`: the paper's Eq. 19, δ ← δ − T/Ṫ, always taken (only the clamp bounds it).
 //!
-//! `min_gain` (Gauss–Newton only; default 1e-2, 0 = off): a move must also lower G² = Σg² by
-//! that share of its mean per interior vertex, G²/n. The 0.1 % of T above is relative to the
+//! `min_gain` (Gauss–Newton only; default 1e-2, 0 = off): a move must also lower G = Σg² (Eq. 4) by
+//! that share of its mean per interior vertex, G/n. The 0.1 % of T above is relative to the
 //! vertex's own T, so on a garment that cannot become developable by moves along the normals,
 //! the heap spends most of its budget on vertices whose |g| is already near ε, each move
 //! gaining a thousandth of almost nothing, while g_max sits on stalled vertices: the t-shirt
-//! used all 500000 pops (G 0.412, g_max 0.134). The floor falls with G², so a run that
+//! used all 500000 pops (G 0.412, g_max 0.134). The floor falls with G, so a run that
 //! converges is not held back; when the heap runs dry, every stalled vertex above ε gets
 //! another try under the lower floor, while such sweeps still move something. Measured (CLI,
 //! defaults otherwise, 0 → 1e-2 → 2e-2): t-shirt pops 500000 → 118243 → 82571, G 0.412 →
@@ -44,7 +44,7 @@
 //! one that does not lower T). If the moves together made g_max worse (the paper's Newton
 //! update does on real garments), the input is returned.
 
-use super::energy::{g_max, Model};
+use super::energy::{big_g, g_max, Model};
 use super::{Params, Run, Stop, Update};
 use crate::algorithms::{AlgoError, Control, Progress};
 use crate::geometry::corner_angle_gradient;
@@ -104,8 +104,8 @@ pub(super) fn run(
         Update::Newton => 0.0,
     };
     let interior = (0..nv).filter(|&v| model.is_interior(v)).count().max(1) as f64;
-    // G² = Σ g², kept by each move's change (a move changes g only in `scratch.verts`).
-    let mut g2: f64 = g.iter().map(|x| x * x).sum();
+    // G, kept by each move's change (a move changes g only in `scratch.verts`).
+    let mut big_g_now = big_g(&g);
     let mut moved_since_sweep = false;
     let out_of_moves = loop {
         if pops >= params.max_moves {
@@ -154,7 +154,7 @@ pub(super) fn run(
                 delta_t,
                 params.update,
                 params.relaxation,
-                (floor_share * g2 / interior).max(0.0),
+                (floor_share * big_g_now / interior).max(0.0),
                 &mut scratch,
             )
         } else {
@@ -168,7 +168,7 @@ pub(super) fn run(
         // g changed at q and its ring; T changed for every vertex within two rings.
         moved_since_sweep = true;
         for (k, &v) in scratch.verts.iter().enumerate() {
-            g2 += scratch.g_after[k] * scratch.g_after[k] - g[v as usize] * g[v as usize];
+            big_g_now += scratch.g_after[k] * scratch.g_after[k] - g[v as usize] * g[v as usize];
             g[v as usize] = scratch.g_after[k];
         }
         scratch.commit(&mut cache);

@@ -133,8 +133,8 @@ pub struct Params {
     pub update: Update,
     /// `local`, `gauss_newton`: over-relaxation ω of each move, in (0, 2).
     pub relaxation: f64,
-    /// `local`, `gauss_newton`: a move must also lower G² = Σg² by this share of its mean
-    /// per interior vertex, G²/n (0: only its own T's 0.1 %; see the `local` module).
+    /// `local`, `gauss_newton`: a move must also lower G = Σg² by this share of its mean
+    /// per interior vertex, G/n (0: only its own T's 0.1 %; see the `local` module).
     pub min_gain: f64,
     /// `loop`: Loop subdivision levels.
     pub levels: usize,
