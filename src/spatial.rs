@@ -167,8 +167,11 @@ pub fn vertex_surface_hausdorff(
             .reduce(|| 0.0, f64::max)
             .sqrt()
     };
-    let gb = TriangleBvh::new(b_pos, b_tri);
-    let ga = TriangleBvh::new(a_pos, a_tri);
+    // The two hierarchies are independent: build them side by side.
+    let (gb, ga) = rayon::join(
+        || TriangleBvh::new(b_pos, b_tri),
+        || TriangleBvh::new(a_pos, a_tri),
+    );
     one(a_pos, a_tri, &gb).max(one(b_pos, b_tri, &ga))
 }
 
