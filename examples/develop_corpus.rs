@@ -2,7 +2,7 @@
 //! procedural families: saddles, domes and the developable sheets at 2k–45k faces, noise 0.01
 //! and 0.1 mean edge lengths), one line per case. Every figure but the iteration count and
 //! the stop reason is measured here from the geometry (corpus::measure; δS from recomputed
-//! edge lengths), not taken from the job's report:
+//! edge lengths; G = Σϖ² from the output's angle sums), not taken from the job's report:
 //!
 //!     cargo run --release --example develop_corpus -- [FILTER] [--set KEY=VALUE ...]
 //!         [--no-shared]
@@ -35,6 +35,15 @@ fn delta_s(input: &Mesh, output: &Mesh) -> f64 {
     }
 }
 
+/// G = Σ ϖ² over the interior vertices (Eq. 4), recomputed from the output's angle sums.
+fn big_g(mesh: &Mesh) -> f64 {
+    let theta = flatmesh::geometry::angle_sums(mesh);
+    flatmesh::geometry::flattenability(mesh, &theta)
+        .iter()
+        .map(|w| w * w)
+        .sum()
+}
+
 fn main() {
     let args = corpus::ExampleArgs::parse(std::env::args().skip(1)).expect("arguments");
     let (filter, shared) = (args.filter, args.shared);
@@ -46,8 +55,19 @@ fn main() {
         .map(|p| p.file_stem().unwrap_or_default().to_string_lossy().into())
         .collect();
     println!(
-        "{:<28} {:>6} {:>5} {:>9} {:>9} {:>7} {:>7} {:>9} {:>13} {:>5} {:>7}  stop",
-        "case", "faces", "conv", "ϖ_in", "ϖ_out", "δS%", "hd%", "folds", "min angle°", "its", "s"
+        "{:<28} {:>6} {:>5} {:>9} {:>9} {:>9} {:>7} {:>7} {:>9} {:>13} {:>5} {:>7}  stop",
+        "case",
+        "faces",
+        "conv",
+        "ϖ_in",
+        "ϖ_out",
+        "G_out",
+        "δS%",
+        "hd%",
+        "folds",
+        "min angle°",
+        "its",
+        "s"
     );
     for case in corpus::cases(root, shared) {
         if !case.name.contains(&filter) || closed.contains(&case.name) {
@@ -73,12 +93,13 @@ fn main() {
         let output = out.mesh.clone().unwrap_or_else(|| input.clone());
         let m = corpus::measure(&input, &output);
         println!(
-            "{:<28} {:>6} {:>5} {:>9.2e} {:>9.2e} {:>7.2} {:>7.2} {:>4}→{:<4} {:>6.2}→{:<6.2} {:>5} {:>7.2}  {}",
+            "{:<28} {:>6} {:>5} {:>9.2e} {:>9.2e} {:>9.3e} {:>7.2} {:>7.2} {:>4}→{:<4} {:>6.2}→{:<6.2} {:>5} {:>7.2}  {}",
             case.name,
             input.num_faces(),
             m.varpi_out <= params.tolerance(),
             m.varpi_in,
             m.varpi_out,
+            big_g(&output),
             100.0 * delta_s(&input, &output),
             100.0 * m.hausdorff_relative,
             m.folds_in,
