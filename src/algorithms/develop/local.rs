@@ -790,18 +790,28 @@ mod tests {
     use crate::geometry::corner_angle;
     use crate::mesh::is_degenerate_triangle;
 
+    /// A reproducible uniform sequence in [0, 1) (a 64-bit LCG's top 53 bits).
+    fn uniform(mut seed: u64) -> impl FnMut() -> f64 {
+        move || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
+    /// [`uniform`] shifted to [−0.5, 0.5).
+    fn centred(seed: u64) -> impl FnMut() -> f64 {
+        let mut u = uniform(seed);
+        move || u() - 0.5
+    }
+
     /// Against `geometry::corner_angle` at every corner, on random triangles and on slivers
     /// (a corner of 1e-9 rad, and one near π): within 1e-14 rad, and the small corners to 1e-9
     /// of their size; the three sum to π.
     #[test]
     fn corners_agree_with_corner_angle() {
-        let mut seed = 7u64;
-        let mut rand = move || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut rand = centred(7);
         let mut cases: Vec<[[f64; 3]; 3]> = (0..2000)
             .map(|_| {
                 [
@@ -839,13 +849,7 @@ mod tests {
     /// for angles below 1e-3, 1e-15 of their size. NaN stays NaN.
     #[test]
     fn atan2_upper_agrees_with_std() {
-        let mut seed = 3u64;
-        let mut rand = move || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rand = uniform(3);
         let mut cases: Vec<(f64, f64)> = (0..200_000)
             .map(|_| {
                 let s = 10f64.powf(rand() * 40.0 - 20.0);
@@ -888,13 +892,7 @@ mod tests {
     /// with non-finite coordinates.
     #[test]
     fn corners_checked_refuses_the_degenerate() {
-        let mut seed = 11u64;
-        let mut rand = move || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut rand = centred(11);
         let mut cases: Vec<[[f64; 3]; 3]> = (0..2000)
             .map(|_| {
                 let s = 10f64.powf(rand() * 30.0);
