@@ -514,66 +514,6 @@ fn group_amd(
     Ok((fwd, inv))
 }
 
-/// A dense LU with partial pivoting of a matrix refilled in place each time, on this thread
-/// (`Par::Seq`): `Mat::partial_piv_lu` takes faer's global parallelism, and on the small
-/// (≤ 600) systems `unfold` solves hundreds of times per region, rayon's hand-offs cost more
-/// than the arithmetic (perf on develop's t-shirt: a sixth of the run in the scheduler).
-pub struct DenseLu {
-    lu: faer::Mat<f64>,
-    perm: Vec<usize>,
-    perm_inv: Vec<usize>,
-    mem: faer::dyn_stack::MemBuffer,
-}
-
-impl DenseLu {
-    /// Buffers for n × n systems.
-    pub fn new(n: usize) -> Self {
-        use faer::linalg::lu::partial_pivoting::{factor, solve};
-        let par = faer::Par::Seq;
-        let req = factor::lu_in_place_scratch::<usize, f64>(n, n, par, Default::default())
-            .or(solve::solve_in_place_scratch::<usize, f64>(n, 1, par));
-        DenseLu {
-            lu: faer::Mat::zeros(n, n),
-            perm: vec![0; n],
-            perm_inv: vec![0; n],
-            mem: faer::dyn_stack::MemBuffer::new(req),
-        }
-    }
-
-    /// The matrix to fill before [`DenseLu::factor`] (overwritten by its factors).
-    pub fn matrix(&mut self) -> &mut faer::Mat<f64> {
-        &mut self.lu
-    }
-
-    /// Factor the filled matrix in place.
-    pub fn factor(&mut self) {
-        let stack = faer::dyn_stack::MemStack::new(&mut self.mem);
-        faer::linalg::lu::partial_pivoting::factor::lu_in_place(
-            self.lu.as_mut(),
-            &mut self.perm,
-            &mut self.perm_inv,
-            faer::Par::Seq,
-            stack,
-            Default::default(),
-        );
-    }
-
-    /// Solve A x = `rhs` in place with the last factors.
-    pub fn solve_in_place(&mut self, rhs: &mut [f64]) {
-        let n = self.perm.len();
-        let perm = faer::perm::PermRef::new_checked(&self.perm, &self.perm_inv, n);
-        let stack = faer::dyn_stack::MemStack::new(&mut self.mem);
-        faer::linalg::lu::partial_pivoting::solve::solve_in_place(
-            self.lu.as_ref(),
-            self.lu.as_ref(),
-            perm,
-            faer::MatMut::from_column_major_slice_mut(rhs, n, 1),
-            faer::Par::Seq,
-            stack,
-        );
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -718,43 +658,5 @@ mod tests {
         let mut holes = groups.clone();
         holes[0] = 10 * m as u32;
         assert!(LdltSolver::new(n, &entries, vec![1; n], Some(&holes)).is_err());
-    }
-
-    /// Against the product: A x = b recomputed from A as filled, for a nonsymmetric system
-    /// that needs pivoting (a zero on the diagonal), refilled and solved twice.
-    #[test]
-    fn dense_lu_solves_what_it_was_given() {
-        let n = 7;
-        let mut lu = super::DenseLu::new(n);
-        for round in 0..2 {
-            let a = |i: usize, j: usize| -> f64 {
-                if i == j {
-                    if i == 0 {
-                        0.0
-                    } else {
-                        4.0 + round as f64
-                    }
-                } else {
-                    ((i * 7 + j * 3 + round) % 5) as f64 - 2.0
-                }
-            };
-            let m = lu.matrix();
-            for i in 0..n {
-                for j in 0..n {
-                    m[(i, j)] = a(i, j);
-                }
-            }
-            lu.factor();
-            let b: Vec<f64> = (0..n).map(|i| i as f64 - 3.0).collect();
-            let mut x = b.clone();
-            lu.solve_in_place(&mut x);
-            for (i, bi) in b.iter().enumerate() {
-                let ax: f64 = x.iter().enumerate().map(|(j, xj)| a(i, j) * xj).sum();
-                assert!(
-                    (ax - bi).abs() < 1e-10,
-                    "round {round}, row {i}: {ax} vs {bi}"
-                );
-            }
-        }
     }
 }
