@@ -446,7 +446,12 @@ fn remeshing_mends_the_folds_and_slivers_unfolding_left() {
 /// folds the input did not have (measured 2026-11-27: ϖ_max 4.4e-3, 28 folded edges, smallest
 /// corner 0.01°); remeshing that stalled result and solving again lowers ϖ_max (measured
 /// 2.9e-3, 9 folds, 2.39°). Checked against an independent run without remeshing, from the
-/// geometry: ϖ_max lower, fewer new folds plus slivers.
+/// geometry: ϖ_max lower; the report's new folds and slivers recounted from the geometry.
+/// On an unconverged result a round is kept by ϖ_max first (`remesh_defects`), so whether
+/// the stall it ends in has fewer new folds plus slivers than the one it started from is not
+/// promised, and is not asserted: three solves of unfold's regions that differ only in
+/// rounding (dense LU, sparse LDLᵀ, LDLᵀ with a refinement step; session 36) ended at 7, 25
+/// and 22 against 12 without remeshing.
 #[test]
 fn remeshing_a_stalled_whole_garment_lowers_its_flattenability() {
     let Some(root) = shared_root() else { return };
@@ -479,11 +484,15 @@ fn remeshing_a_stalled_whole_garment_lowers_its_flattenability() {
         let (f, s) = folds_and_slivers(m, 2.0);
         f.difference(&folds_in).count() + s.difference(&slivers_in).count()
     };
-    assert!(
-        count(&out) < count(&before),
-        "new folds plus slivers: {} without remeshing, {} with it",
+    assert_eq!(
+        r.new_folds[0] + r.new_slivers[0],
         count(&before),
-        count(&out)
+        "the report's new folds plus slivers before remeshing, against the run without it"
+    );
+    assert_eq!(
+        r.new_folds[1] + r.new_slivers[1],
+        count(&out),
+        "the report's new folds plus slivers after remeshing, against the geometry"
     );
 }
 
