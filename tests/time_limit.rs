@@ -48,28 +48,29 @@ async fn every_kind_ends_within_a_second_of_its_time_limit() {
     // (measured 2026-11-29): it gets four times the faces.
     let big = upload(&c, &s, noisy_saddle_obj(320)).await;
     let big_id = big["id"].as_str().unwrap();
+    // (kind, params, mesh)
     let runs = [
         (
             "flatten",
             json!({"tolerance": 1e-300, "max_iterations": 100000}),
+            id,
         ),
-        ("fl-mesh", json!({})),
-        ("subdivide", json!({"levels": 1})),
-        ("perturb", json!({})),
-        ("develop", json!({"method": "global"})),
+        ("fl-mesh", json!({}), id),
+        ("subdivide", json!({"levels": 1}), id),
+        ("perturb", json!({}), id),
+        ("develop", json!({"method": "global"}), id),
         // 500000 moves take ~0.5 s here since they got cheaper: ten times as many, and no
-        // min_gain floor, which could end the run stalled inside the limit; on `big`.
+        // min_gain floor, which could end the run stalled inside the limit.
         (
             "develop",
             json!({"method": "local", "max_moves": 5_000_000, "min_gain": 0}),
+            big_id,
         ),
-        ("develop", json!({"method": "loop"})),
-        ("segment", json!({})),
+        ("develop", json!({"method": "loop"}), id),
+        ("segment", json!({}), id),
     ];
     let mut jobs = Vec::new();
-    for (kind, params) in &runs {
-        let local = params["method"] == "local";
-        let mesh_id = if local { big_id } else { id };
+    for (kind, params, mesh_id) in &runs {
         let j = submit(
             &c,
             &s,
@@ -79,7 +80,7 @@ async fn every_kind_ends_within_a_second_of_its_time_limit() {
         jobs.push(j["id"].as_str().unwrap().to_string());
     }
     let mut previous_end: Option<serde_json::Value> = None;
-    for ((kind, params), jid) in runs.iter().zip(&jobs) {
+    for ((kind, params, _), jid) in runs.iter().zip(&jobs) {
         let end = wait_for(&c, &s, jid, &["succeeded", "failed", "cancelled"]).await;
         let held = seconds_between(&end["started_at"], &end["finished_at"]);
         eprintln!(
