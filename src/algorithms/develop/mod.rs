@@ -111,8 +111,8 @@ pub struct Params {
     /// `sqp`: weight μ of Σ|v − v⁰|² beside E (both over h̄²).
     pub closeness: f64,
     /// `sqp`: weight κ of the displacement's Dirichlet energy Σ_e |d_a − d_b|² beside E
-    /// (over h̄²) until the mesh is flattenable and stationary, 0 from there on; 0: least
-    /// stretch throughout.
+    /// (over h̄²) until the mesh is flattenable, 0 from there on; 0: least stretch
+    /// throughout.
     pub smoothness: f64,
     /// `sqp`: once flattenable, stop when a step (times 1 + σ, its trust-region shortening)
     /// moves no vertex more than this many mean edge lengths.
@@ -404,8 +404,8 @@ pub struct Summary {
     pub stop_detail: String,
     /// Outer iterations (`penalty_cg`), Newton iterations (`sqp`) or heap pops (`local`).
     pub iterations: usize,
-    /// CG steps (`penalty_cg`), heap pops (`local`, as `iterations`), corrections taken
-    /// (`sqp`).
+    /// CG steps (`penalty_cg`), heap pops (`local`, as `iterations`), corrections taken and
+    /// refused trials shortened on the same factorisation (`sqp`).
     pub inner_steps: usize,
     /// The iteration whose positions are returned (0: the start).
     pub best_iteration: usize,
