@@ -205,7 +205,10 @@
 //!   refused). The re-solves cost time: worksuit 36 → 75 s, casualsuit05 39 → 121 s,
 //!   casualsuit01 114 → 245 s with its three kept rounds, shirt_artist 203 → 326 s for
 //!   nothing. Without refinement in the re-solve the gains vanish (elegantsuit and
-//!   casualsuit02 unchanged), so it keeps `refine`.
+//!   casualsuit02 unchanged), so it keeps `refine`. Since develop's SQP (the detour below)
+//!   shortens refused trials in place (2026-11-29), elegantsuit's round 1 re-solves to
+//!   4.5e-3 and is refused (4.4e-3 stays; before, 2.2e-3 in three rounds); the other
+//!   figures here were not measured again.
 //! - Detour through develop's SQP (`detour`, default on; [`detour`]). Whole garments (a sphere
 //!   with 3–11 holes, sleeves and legs joined to the body) stall with nearly every interior
 //!   vertex at the same small excess θ > 2π (mh_female_elegantsuit01's top: 2219 of 2227

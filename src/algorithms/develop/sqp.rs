@@ -378,6 +378,10 @@ pub(super) fn run(
             if taken || tries == backtracks {
                 break taken;
             }
+            // A shortened trial with its corrections can take seconds on a big mesh.
+            if control.cancelled() {
+                return Err(AlgoError::Cancelled);
+            }
             tries += 1;
             run.inner += 1;
             alpha *= shrink;
