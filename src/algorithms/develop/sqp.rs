@@ -57,8 +57,11 @@
 //! bookkept as the refusal it replaces (λ doubles, or σ quadruples, whose step is about 1/σ as
 //! long): a refusal then costs an evaluation instead of a factorisation. Measured (issue 16
 //! note, 2026-11-29): t-shirt 69 → 56 iterations (restoration 49 → 41), every halved
-//! restoration trial taken; the 35-case subset 3872 → 3498, all still converged, δS within
-//! ±0.5 % points but saddle-7700-0.1 11.8 → 14.8 %. The objective phase replaced (issue 16 note, 2026-11-26) a step weight w halved
+//! restoration trial taken; the 35-case subset 3872 → 3498, all still converged, δS lower on
+//! 13 (saddle-2000-0.1 12.9 → 12.0 %), higher on 6 (saddle-7700-0.1 11.8 → 14.8 %, the rest
+//! by at most 0.16 % points).
+//!
+//! The objective phase replaced (issue 16 note, 2026-11-26) a step weight w halved
 //! after each refusal with λ left where restoration ended and κ lowered ÷ 10 at each stationary
 //! point: E's Gauss–Newton Hessian ignores the constraints' curvature, so the undamped step was
 //! 10–70 h̄ long and only w ≈ 2e-3 of it was taken; w never grew back, λ = 1e-4 kept the
