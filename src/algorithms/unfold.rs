@@ -24,7 +24,7 @@
 //!   stretch; a fold that bending did not open is tried once more without it; a sliver's
 //!   repair is a change of lengths, so not there), and ½ μ |x − x⁰|²/h̄², a small pull to
 //!   the start that makes the Gauss–Newton Hessian regular.
-//! - Step: sequential quadratic programming on the dense KKT system
+//! - Step: sequential quadratic programming on the KKT system
 //!   `[H + σI, Aᵀ; A, −εI]` (A = ∂θ/∂x of the rows, FL paper Props. 1–2) with a
 //!   Levenberg–Marquardt trust region σ (÷3 after a taken step, ×4 after a refused one), and
 //!   up to [`MAX_CORRECTIONS`] re-solves with the same factorisation against the rows'
@@ -65,13 +65,14 @@ use std::f64::consts::{PI, TAU};
 /// 2, 3, 4, 3 then 5, 2 then 4, and three passes over the folds, all left 133–142 of their 398
 /// new folds; 3 alone was the cheapest.
 const RINGS: usize = 3;
-/// Most vertices a region may move (a regular mesh's 3 rings hold 50–70; the dense KKT
-/// system has about five unknowns per vertex, so this bounds it near 600 × 600, 3 MB), and
-/// most vertices its breadth-first search may reach (16 times that bounds the corners of the
-/// rows' fans): a hub of 60k long fan triangles would otherwise ask for a 460 GB matrix.
+/// Most vertices a region may move (a regular mesh's 3 rings hold 50–70; the KKT system has
+/// about five unknowns per vertex, and its pattern's slot map is n × n, so this bounds it
+/// near 600 × 600, 1.4 MB), and most vertices its breadth-first search may reach (16 times
+/// that bounds the corners of the rows' fans): a hub of 60k long fan triangles would
+/// otherwise ask for a 230 GB slot map.
 const MAX_REGION: usize = 120;
 const MAX_REGION_REACH: usize = 1000;
-/// Most folds tried per mesh (a crumpled mesh has thousands; each costs a few dense solves).
+/// Most folds tried per mesh (a crumpled mesh has thousands; each costs a few solves).
 const MAX_TARGETS: usize = 2000;
 /// Iterations per region: 60 left one of the test strip's four crease edges folded; on the
 /// garments the totals were alike.
@@ -269,7 +270,7 @@ fn repair(
             Seed::Sliver(f) => &mesh.triangles()[*f as usize],
         };
         let Some(region) = Region::new(mesh, vertices, RINGS, task, scratch) else {
-            continue; // a neighbourhood too large for a dense solve (a hub of long fans)
+            continue; // a neighbourhood too large (a hub of long fans)
         };
         if region.verts.is_empty() {
             continue;
@@ -298,14 +299,7 @@ fn repair(
 
 /// Add w r² (r a residual with gradient `g` per slot, NONE: a fixed vertex) to the
 /// Gauss–Newton model: w g gᵀ into `k`, −w r g into `rhs`.
-fn add_term(
-    k: &mut faer::Mat<f64>,
-    rhs: &mut [f64],
-    slots: &[u32],
-    g: &[[f64; 3]],
-    r: f64,
-    w: f64,
-) {
+fn add_term(k: &mut Lower, rhs: &mut [f64], slots: &[u32], g: &[[f64; 3]], r: f64, w: f64) {
     for (a, &sa) in slots.iter().enumerate() {
         if sa == NONE {
             continue;
@@ -321,9 +315,40 @@ fn add_term(
             let sb = 3 * sb as usize;
             for i in 0..3 {
                 for j in 0..3 {
-                    k[(sa + i, sb + j)] += w * g[a][i] * g[b][j];
+                    k.add(sa + i, sb + j, w * g[a][i] * g[b][j]);
                 }
             }
+        }
+    }
+}
+
+/// A region's KKT matrix as its pattern's lower triangle, assembled in place. It replaced a
+/// dense n × n buffer, cleared every iteration and gathered into the pattern's values (the
+/// same sums in the same order, so the same factorisation): its clearing alone was 2 % of
+/// develop's instructions on the t-shirt.
+struct Lower {
+    n: usize,
+    /// Per (r, c) with r ≥ c, at r·n + c: its index in `values` (u32::MAX off the pattern).
+    slot: Vec<u32>,
+    /// In the order of the pattern `Region::kkt_pattern` returns.
+    values: Vec<f64>,
+}
+
+impl Lower {
+    /// Add to entry (r, c); the upper triangle, which the LDLᵀ does not read, is skipped, and
+    /// so is an entry off the pattern (none is written: the pattern holds every coupling).
+    fn add(&mut self, r: usize, c: usize, v: f64) {
+        if r >= c {
+            if let Some(x) = self.values.get_mut(self.slot[r * self.n + c] as usize) {
+                *x += v;
+            }
+        }
+    }
+
+    /// Set diagonal entry i.
+    fn set_diagonal(&mut self, i: usize, v: f64) {
+        if let Some(x) = self.values.get_mut(self.slot[i * self.n + i] as usize) {
+            *x = v;
         }
     }
 }
@@ -704,25 +729,27 @@ impl Region {
         let mut trial = work.clone();
         let mut ct = Vec::with_capacity(r);
         let mut best: Option<(usize, f64, Vec<[f64; 3]>)> = None;
-        // Assembled afresh every iteration into a dense buffer, allocated once, and factored
-        // on the region's pattern (see `kkt_pattern`).
-        let mut kdense = faer::Mat::<f64>::zeros(n, n);
-        let pattern = self.kkt_pattern();
+        // Assembled afresh every iteration on the region's pattern (see `kkt_pattern`).
+        let (pattern, slot) = self.kkt_pattern();
+        let mut kmat = Lower {
+            n,
+            slot,
+            values: vec![0.0; pattern.len()],
+        };
         let signs = (0..n).map(|i| if i < 3 * m { 1 } else { -1 }).collect();
         let groups: Vec<u32> = (0..n)
             .map(|i| if i < 3 * m { i / 3 } else { i - 2 * m } as u32)
             .collect();
         let mut lu = crate::linalg::LdltSolver::new(n, &pattern, signs, Some(&groups)).ok()?;
-        let mut values = vec![0.0; pattern.len()];
         let mut rhs = vec![0.0; n];
         let mut corr = vec![0.0; n];
         for _ in 0..MAX_ITERATIONS {
             // K = [H + σI, Aᵀ; A, −εI] in units of h̄; right-hand side [−∇f; 2π − θ].
-            let kmat = &mut kdense;
-            kmat.fill(0.0);
+            let kmat = &mut kmat;
+            kmat.values.fill(0.0);
             rhs.fill(0.0);
             for i in 0..3 * m {
-                kmat[(i, i)] = CLOSENESS + sigma;
+                kmat.set_diagonal(i, CLOSENESS + sigma);
             }
             for (s, &v) in self.verts.iter().enumerate() {
                 for i in 0..3 {
@@ -771,7 +798,7 @@ impl Region {
             }
             for (row, fan) in self.fans.iter().enumerate() {
                 let ri = 3 * m + row;
-                kmat[(ri, ri)] = -REGULARISATION;
+                kmat.set_diagonal(ri, -REGULARISATION);
                 rhs[ri] = c[row] - held[row];
                 for (corner, slots) in fan {
                     let [a, b, d] = corner.map(|v| work[v as usize]);
@@ -783,17 +810,13 @@ impl Region {
                         }
                         for i in 0..3 {
                             let col = 3 * slots[x] as usize + i;
-                            kmat[(ri, col)] += grads[x][i] * h;
-                            kmat[(col, ri)] += grads[x][i] * h;
+                            kmat.add(ri, col, grads[x][i] * h);
                         }
                     }
                 }
             }
-            for (v, &(i, j)) in values.iter_mut().zip(&pattern) {
-                *v = kmat[(i, j)];
-            }
             let solved = lu
-                .factor(&values)
+                .factor(&kmat.values)
                 .and_then(|()| lu.solve_in_place(&mut rhs));
             if solved.is_err() || rhs.iter().any(|x| !x.is_finite()) {
                 sigma *= 4.0;
@@ -862,16 +885,18 @@ impl Region {
 
     /// The lower triangle of the region's KKT pattern, every coupling a term can make: the
     /// 3×3 blocks of the slots a hinge, a face (its corners) or an edge joins, and each row's
-    /// entries for the slots of its fan. Sparse: a dense LU of these 300–600 unknowns was most
-    /// of unfold's time (0.6 s on the t-shirt's five regions).
-    fn kkt_pattern(&self) -> Vec<(usize, usize)> {
+    /// entries for the slots of its fan; and per (r, c) with r ≥ c, at r·n + c, its index in
+    /// that list (u32::MAX off it), for [`Lower`]. Sparse: a dense LU of these 300–600
+    /// unknowns was most of unfold's time (0.6 s on the t-shirt's five regions).
+    fn kkt_pattern(&self) -> (Vec<(usize, usize)>, Vec<u32>) {
         let m = self.verts.len();
         let n = 3 * m + self.rows.len();
-        let mut mark = vec![false; n * n];
+        let mut slot = vec![u32::MAX; n * n];
         let mut out = Vec::new();
         let mut put = |r: usize, c: usize| {
             let (r, c) = (r.max(c), r.min(c));
-            if !std::mem::replace(&mut mark[r * n + c], true) {
+            if slot[r * n + c] == u32::MAX {
+                slot[r * n + c] = out.len() as u32;
                 out.push((r, c));
             }
         };
@@ -909,7 +934,7 @@ impl Region {
                 }
             }
         }
-        out
+        (out, slot)
     }
 
     /// `p` moved by h̄ times the first 3m entries of `step`.
