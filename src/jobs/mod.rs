@@ -194,7 +194,8 @@ impl Kind {
                  loop, 1e-4 for local), d_tolerance (where D[M] is reported: [1e-6, 1e-4, 1e-3, \
                  1e-2]), solver=sqp|penalty_cg (global and loop: sqp), max_iterations (global \
                  and loop: 200), fix_boundary=true|false (global and loop: false), closeness \
-                 (sqp: 1e-2), smoothness (sqp: 10, then 0 once flattenable), step_tolerance (sqp: 1e-4), stall_iterations (sqp: 40), restore=true|false (global and \
+                 (sqp: 1e-2), smoothness (sqp: 10, then 0 once flattenable), step_tolerance \
+                 (sqp: 1e-4), stall_iterations (sqp: 40), restore=true|false (global and \
                  loop; sqp: true, penalty_cg: false; an unflattenable stall is followed by \
                  fl-mesh from the input, boundary fixed, and the same solver again from its \
                  result when that is flattenable or lower, with \

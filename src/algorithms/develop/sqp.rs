@@ -84,7 +84,8 @@
 //! purposes, not just the first flattenable iterate; a run that is flattenable but not there
 //! yet says so in its detail). The creep rate is the former 0.1 % over ten iterations; with
 //! refusals shortened in place each iteration takes a step, and the shorter window changed no
-//! δS of the 35-case subset by more than 0.01 % points (3086 → 2978 iterations); `stall` when g_max has not halved in `stall_iterations`;
+//! δS of the 35-case subset by more than 0.01 % points (3086 → 2978 iterations); `stall`
+//! when g_max has not halved in `stall_iterations`;
 //! `line_search` when λ passes 1e8. The best iterate is returned: the feasible one with the
 //! least f, else the one with the least g_max.
 
