@@ -662,7 +662,7 @@ pub struct Summary {
     pub patches: PatchesUsed,
 }
 
-/// The patches an fl-mesh job solved for.
+/// The patches an fl-mesh or develop job solved for.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct PatchesUsed {
     /// `file` or `uv`.

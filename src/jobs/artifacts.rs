@@ -124,7 +124,7 @@ pub fn check_shape(input: &Mesh, outcome: &JobOutcome) -> Option<ShapeCheck> {
              whole garment whose sleeves or legs join its body) creases instead: cut it into \
              panels first (the segment job with then=fl-mesh makes each panel flattenable; \
              or give the panels as patches in the file, or as islands of its texture layout, \
-             which fl-mesh takes by default)"
+             which fl-mesh takes by default and develop with patches=auto)"
         ));
     }
     if folded {
@@ -135,7 +135,7 @@ pub fn check_shape(input: &Mesh, outcome: &JobOutcome) -> Option<ShapeCheck> {
              whose sleeves or legs join its body) folds there: cut it into panels first \
              (the segment job with then=fl-mesh makes each panel flattenable; or give the \
              panels as patches in the file, or as islands of its texture layout, which \
-             fl-mesh takes by default)"
+             fl-mesh takes by default and develop with patches=auto)"
         ));
     }
     if min_angle_after < SLIVER_DEGREES.min(min_angle_before) {

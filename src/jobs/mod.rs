@@ -193,7 +193,11 @@ impl Kind {
                 "method=global|local|loop (global), tolerance (g_max in rad: 1e-6 for global and \
                  loop, 1e-4 for local), d_tolerance (where D[M] is reported: [1e-6, 1e-4, 1e-3, \
                  1e-2]), solver=sqp|penalty_cg (global and loop: sqp), max_iterations (global \
-                 and loop: 200), fix_boundary=true|false (global and loop: false), closeness \
+                 and loop: 200), fix_boundary=true|false (global and loop: false), \
+                 patches=file|auto|uv (file; uv: one patch per island of the file's texture \
+                 layout, auto: uv when the layout cuts the file's patches into a sewing \
+                 pattern, as fl-mesh's patches; seams stay welded and move unless \
+                 fix_boundary), closeness \
                  (sqp: 1e-2), smoothness (sqp: 10, then 0 once flattenable), step_tolerance \
                  (sqp: 1e-4), stall_iterations (sqp: 40), restore=true|false (global and \
                  loop; sqp: true, penalty_cg: false; an unflattenable stall is followed by \

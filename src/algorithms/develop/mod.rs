@@ -140,6 +140,11 @@ pub struct Params {
     pub levels: usize,
     /// Tolerances (radians) at which D[M] is reported.
     pub d_tolerance: Vec<f64>,
+    /// The patches whose interior vertices must reach 2π (seams welded; they move unless
+    /// `fix_boundary`): `file` (default), `uv` (one per island of the texture layout) or
+    /// `auto` (`uv` when the layout cuts the file's patches into a sewing pattern), chosen as
+    /// fl-mesh chooses them ([`super::fl_mesh::choose_patches`]).
+    pub patches: super::fl_mesh::Patches,
     /// `sqp`: repair the folds (edges whose normals turn past 120°), then the corners below 1°,
     /// of a flattenable result that the start did not have, moving their neighbourhoods along
     /// θ = 2π (the `unfold` module; beyond the papers).
@@ -170,6 +175,7 @@ impl Default for Params {
             min_gain: 1e-2,
             levels: 1,
             d_tolerance: vec![1e-6, 1e-4, 1e-3, 1e-2],
+            patches: super::fl_mesh::Patches::File,
             unfold: true,
         }
     }
@@ -448,6 +454,8 @@ pub struct Summary {
     /// what repairing them did (counts of the whole mesh).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub unfold: Option<super::unfold::Summary>,
+    /// The patches that were made flattenable (the parameter `patches`) and why.
+    pub patches: super::fl_mesh::PatchesUsed,
 }
 
 /// δD of Su et al.'s Table 1, percent: (D[M_R] − D[M_L]) / D[M_L] × 100; None when D[M_L] = 0.
@@ -501,6 +509,17 @@ pub fn run(
     control: &dyn Control,
 ) -> Result<Outcome<Summary>, AlgoError> {
     params.check()?;
+    // From here on "the input" is the mesh with the patches chosen: the same surface, its
+    // seams where the patches say (and a cut inside an island opened by copies of its
+    // vertices), so every figure before and after is measured on the same patches.
+    let (work, mut patches) = super::fl_mesh::choose_patches(mesh, params.patches)?;
+    patches.seams = if params.fix_boundary || params.method == Method::Local {
+        "held"
+    } else {
+        "free"
+    }
+    .into();
+    let mesh = &work;
     let mut levels = Vec::new();
     let start = match params.method {
         Method::Loop => {
@@ -532,11 +551,20 @@ pub fn run(
     };
     let model = Model::new(&start);
     let nv = start.num_vertices();
+    // The two sides of a cut that `patches = uv` opened inside an island (a sleeve's seam)
+    // are separate vertices at one position; free, they would drift apart and open the seam
+    // in 3D (mh_female_sportsuit01: its 53 copies 0.07 apart at the median, 1.4 % of the
+    // diagonal at most), so both sides are held, as fl-mesh holds them with its seams held.
+    let sewn = if patches.opened_vertices > 0 {
+        coincident_vertices(&start)
+    } else {
+        vec![false; nv]
+    };
     let movable: Vec<bool> = (0..nv as u32)
         .map(|v| match start.conn().kind(v) {
             crate::mesh::VertexKind::Unreferenced => false,
             crate::mesh::VertexKind::Interior => true,
-            _ => !params.fix_boundary,
+            _ => !params.fix_boundary && !sewn[v as usize],
         })
         .collect();
     let run = match (params.method, params.solver) {
@@ -573,12 +601,29 @@ pub fn run(
     Distance::report_stage(control);
     let mut summary = summarise(mesh, &levels, &start, &out, &model, &run, params);
     summary.unfold = unfolded;
+    summary.patches = patches;
     Ok(Outcome {
         mesh: Some(out),
         patterns: None,
         summary,
         levels,
     })
+}
+
+/// Per vertex: whether another vertex sits at exactly its position (bitwise).
+fn coincident_vertices(mesh: &Mesh) -> Vec<bool> {
+    let mut first: std::collections::HashMap<[u64; 3], usize> = std::collections::HashMap::new();
+    let mut out = vec![false; mesh.num_vertices()];
+    for (v, p) in mesh.positions().iter().enumerate() {
+        let key = p.map(f64::to_bits);
+        if let Some(&u) = first.get(&key) {
+            out[u] = true;
+            out[v] = true;
+        } else {
+            first.insert(key, v);
+        }
+    }
+    out
 }
 
 /// The folds and slivers (a corner below 1°) of a flattenable `out` that `start` did not
@@ -935,5 +980,6 @@ fn summarise(
         history: run.history.clone(),
         table,
         unfold: None,
+        patches: super::fl_mesh::PatchesUsed::default(),
     }
 }
