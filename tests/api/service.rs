@@ -818,6 +818,8 @@ async fn develop_job_end_to_end() {
     let result = job_result(&c, &s, id).await;
     let fig = &result["job"];
     assert_eq!(fig["kind"], "develop");
+    // The patches made flattenable: the file's, by default.
+    assert_eq!(fig["patches"]["source"], "file", "{fig}");
     let rows = fig["table"]["rows"].as_array().unwrap();
     assert_eq!(rows.len(), 4, "{fig}");
     let level = download(&c, &s, &format!("/v1/jobs/{id}/mesh?level=1&format=obj")).await;
