@@ -197,7 +197,7 @@ impl Kind {
                  patches=file|auto|uv (file; uv: one patch per island of the file's texture \
                  layout, auto: uv when the layout cuts the file's patches into a sewing \
                  pattern, as fl-mesh's patches; seams stay welded and move unless \
-                 fix_boundary), closeness \
+                 fix_boundary, never with local), closeness \
                  (sqp: 1e-2), smoothness (sqp: 10, then 0 once flattenable), step_tolerance \
                  (sqp: 1e-4), stall_iterations (sqp: 40), restore=true|false (global and \
                  loop; sqp: true, penalty_cg: false; an unflattenable stall is followed by \
