@@ -241,7 +241,9 @@ pub fn unfold(
     Ok(out)
 }
 
-/// Repair each seed still there in turn; `done` counts regions for progress.
+/// Repair each seed still there in turn; `done` counts regions for progress. Seeds far
+/// enough apart to share nothing ([`batch_end`]) are opened at once on the rayon pool and
+/// applied in their order, which is what one after the other gives, bit for bit.
 #[allow(clippy::too_many_arguments)]
 fn repair(
     mesh: &Mesh,
@@ -253,55 +255,143 @@ fn repair(
     done: &mut usize,
     control: &dyn Control,
 ) -> Result<(), AlgoError> {
+    use rayon::prelude::*;
     let pending = |p: &[[f64; 3]], seed: &Seed| match *seed {
         Seed::Fold(q) => is_fold(p, q),
         Seed::Sliver(f) => smallest_of(mesh, p, f) < task.min_corner,
     };
-    for seed in seeds {
+    let seed_vertices = |seed: &Seed| -> Vec<u32> {
+        match seed {
+            Seed::Fold(q) => q.to_vec(),
+            Seed::Sliver(f) => mesh.triangles()[*f as usize].to_vec(),
+        }
+    };
+    let mut next = 0;
+    while next < seeds.len() {
         if control.cancelled() {
             return Err(AlgoError::Cancelled);
         }
-        *done += 1;
-        control.progress(&Progress {
-            stage: "unfold".into(),
-            iteration: *done,
-            max_flattenability: None,
-            step_norm: None,
-        });
-        if !pending(&out.positions, seed) {
-            continue; // repaired by a neighbour's region
-        }
-        out.summary.tried += 1;
-        let vertices: &[u32] = match seed {
-            Seed::Fold(q) => q,
-            Seed::Sliver(f) => &mesh.triangles()[*f as usize],
-        };
-        let Some(region) = Region::new(mesh, vertices, RINGS, task, scratch) else {
-            continue; // a neighbourhood too large (a hub of long fans)
-        };
-        if region.verts.is_empty() {
-            continue;
-        }
-        // A fold first by bending (lengths held), then, where that did not open it, freely.
-        let weights: &[f64] = match seed {
-            Seed::Fold(_) => &[STRETCH, 0.0],
-            Seed::Sliver(_) => &[0.0],
-        };
-        for &stretch in weights {
+        // The batch: the seeds from `next` on, up to the first whose neighbourhood meets an
+        // earlier one's (BATCH_RINGS), with their regions.
+        let end = batch_end(mesh, seeds, next, &seed_vertices, scratch);
+        let mut batch: Vec<(&Seed, Region)> = Vec::new();
+        for seed in &seeds[next..end] {
+            *done += 1;
+            control.progress(&Progress {
+                stage: "unfold".into(),
+                iteration: *done,
+                max_flattenability: None,
+                step_norm: None,
+            });
             if !pending(&out.positions, seed) {
-                break;
+                continue; // repaired by a neighbour's region
             }
-            if let Some(moved) = region.open(mesh, &out.positions, task, seed, h, stretch) {
+            out.summary.tried += 1;
+            let Some(region) = Region::new(mesh, &seed_vertices(seed), RINGS, task, scratch) else {
+                continue; // a neighbourhood too large (a hub of long fans)
+            };
+            if !region.verts.is_empty() {
+                batch.push((seed, region));
+            }
+        }
+        next = end;
+        // A fold first by bending (lengths held), then, where that did not open it, freely:
+        // the first attempts of the whole batch at once, the second ones after.
+        let first = |seed: &Seed| match seed {
+            Seed::Fold(_) => STRETCH,
+            Seed::Sliver(_) => 0.0,
+        };
+        let positions = &out.positions;
+        let moved: Vec<Option<Vec<[f64; 3]>>> = batch
+            .par_iter()
+            .map(|(seed, region)| region.open(mesh, positions, task, seed, h, first(seed)))
+            .collect();
+        for ((_, region), moved) in batch.iter().zip(moved) {
+            if let Some(moved) = moved {
                 for (s, &v) in region.verts.iter().enumerate() {
                     out.positions[v as usize] = moved[s];
                 }
             }
         }
-        if !pending(&out.positions, seed) {
-            out.summary.opened += 1;
+        for (seed, region) in &batch {
+            if matches!(seed, Seed::Fold(_)) && pending(&out.positions, seed) {
+                if let Some(moved) = region.open(mesh, &out.positions, task, seed, h, 0.0) {
+                    for (s, &v) in region.verts.iter().enumerate() {
+                        out.positions[v as usize] = moved[s];
+                    }
+                }
+            }
+            if !pending(&out.positions, seed) {
+                out.summary.opened += 1;
+            }
         }
     }
     Ok(())
+}
+
+/// Seeds closer than this many rings share work: a region moves the vertices within
+/// [`RINGS`] of its seed and reads those within two rings of them (its faces' hinges, its
+/// rows' fans), so two seeds more than 2 (RINGS + 1) rings apart read nothing the other
+/// writes, and opening them at once gives what one after the other does.
+const BATCH_RINGS: usize = RINGS + 1;
+/// Most regions opened at once (each holds its own KKT system).
+const MAX_BATCH: usize = 64;
+
+/// The end of the batch that starts at `from`: every seed before it lies more than
+/// 2 BATCH_RINGS rings from every earlier seed of the batch (at least one seed is taken).
+fn batch_end(
+    mesh: &Mesh,
+    seeds: &[Seed],
+    from: usize,
+    seed_vertices: &dyn Fn(&Seed) -> Vec<u32>,
+    scratch: &mut Scratch,
+) -> usize {
+    let conn = mesh.conn();
+    // The BATCH_RINGS neighbourhood of a seed, breadth first; `scratch.near` marks those of
+    // the batch so far (cleared before returning).
+    let neighbourhood = |seed: &Seed, seen: &mut Vec<bool>| -> Vec<u32> {
+        let mut ball = seed_vertices(seed);
+        ball.sort_unstable();
+        ball.dedup();
+        for &v in &ball {
+            seen[v as usize] = true;
+        }
+        let mut layer = (0, ball.len());
+        for _ in 0..BATCH_RINGS {
+            for k in layer.0..layer.1 {
+                for &w in conn.ring_of(ball[k]) {
+                    if !seen[w as usize] {
+                        seen[w as usize] = true;
+                        ball.push(w);
+                    }
+                }
+            }
+            layer = (layer.1, ball.len());
+        }
+        for &v in &ball {
+            seen[v as usize] = false;
+        }
+        ball
+    };
+    scratch.near.resize(mesh.num_vertices(), false);
+    scratch.seen.resize(mesh.num_vertices(), false);
+    let mut marked = Vec::new();
+    let mut end = from;
+    while end < seeds.len() && end - from < MAX_BATCH {
+        let ball = neighbourhood(&seeds[end], &mut scratch.seen);
+        if end > from && ball.iter().any(|&v| scratch.near[v as usize]) {
+            break;
+        }
+        for &v in &ball {
+            scratch.near[v as usize] = true;
+        }
+        marked.extend(ball);
+        end += 1;
+    }
+    for v in marked {
+        scratch.near[v as usize] = false;
+    }
+    end
 }
 
 /// Add w r² (r a residual with gradient `g` per slot, NONE: a fixed vertex) to the
@@ -426,6 +516,9 @@ struct Scratch {
     slot: Vec<u32>,
     row: Vec<u32>,
     face: Vec<bool>,
+    /// Vertices near a seed of the batch being built, and a breadth-first search's visits.
+    near: Vec<bool>,
+    seen: Vec<bool>,
 }
 
 impl Scratch {
@@ -434,6 +527,8 @@ impl Scratch {
             slot: vec![NONE; nv],
             row: vec![NONE; nv],
             face: Vec::new(),
+            near: Vec::new(),
+            seen: Vec::new(),
         }
     }
 }
@@ -1067,6 +1162,80 @@ mod tests {
             }
         }
         assert!(crate::geometry::smallest_corner(&out) >= SLIVER_DEGREES.to_radians());
+    }
+
+    #[test]
+    fn far_apart_folds_opened_at_once_give_what_one_after_another_gives() {
+        // Two copies of the folded strip (separate components, so their folds are far apart),
+        // their creases listed alternately: the first two seeds make one batch.
+        let (strip, crease, ends) = folded_strip(150f64.to_radians());
+        let n = strip.num_vertices() as u32;
+        let mut positions = strip.positions().to_vec();
+        positions.extend_from_slice(strip.positions());
+        let mut triangles = strip.triangles().to_vec();
+        triangles.extend(strip.triangles().iter().map(|t| t.map(|v| v + n)));
+        let nf = triangles.len();
+        let raw = RawMesh {
+            positions,
+            triangles,
+            face_patch: vec![0; nf],
+            patch_names: vec!["strips".into()],
+            uv: None,
+        };
+        let (mesh, _) = Mesh::new(raw).expect("valid strips");
+        let edge = |a: u32, b: u32| {
+            mesh.conn()
+                .edges()
+                .iter()
+                .position(|&e| e == [a.min(b), a.max(b)])
+                .expect("crease edge") as u32
+        };
+        let folds: Vec<u32> = crease
+            .iter()
+            .flat_map(|&e| {
+                let [a, b] = strip.conn().edges()[e as usize];
+                [edge(a, b), edge(a + n, b + n)]
+            })
+            .collect();
+        let movable: Vec<bool> = ends.iter().chain(&ends).map(|&e| !e).collect();
+        let interior: Vec<bool> = (0..mesh.num_vertices() as u32)
+            .map(|v| mesh.conn().is_interior(v))
+            .collect();
+        let task = |folds| Task {
+            folds,
+            slivers: &[],
+            min_corner: 2f64.to_radians(),
+            movable: &movable,
+            constrained: &interior,
+            tolerance: 1e-6,
+        };
+        let seeds: Vec<Seed> = folds
+            .iter()
+            .filter_map(|&e| hinge_of(&mesh, e).map(Seed::Fold))
+            .collect();
+        let vertices = |seed: &Seed| match seed {
+            Seed::Fold(q) => q.to_vec(),
+            Seed::Sliver(f) => mesh.triangles()[*f as usize].to_vec(),
+        };
+        let mut scratch = Scratch::new(mesh.num_vertices());
+        assert_eq!(batch_end(&mesh, &seeds, 0, &vertices, &mut scratch), 2);
+        let at_once =
+            unfold(&mesh, mesh.positions(), &task(&folds), &Silent::default()).expect("runs");
+        assert_eq!(at_once.summary.folds_before, 8);
+        assert_eq!(at_once.summary.folds_after, 0, "{:?}", at_once.summary);
+        let mut pos = mesh.positions().to_vec();
+        for e in &folds {
+            pos = unfold(
+                &mesh,
+                &pos,
+                &task(std::slice::from_ref(e)),
+                &Silent::default(),
+            )
+            .expect("runs")
+            .positions;
+        }
+        assert!(pos != mesh.positions());
+        assert_eq!(at_once.positions, pos);
     }
 
     #[test]
