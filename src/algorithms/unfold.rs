@@ -334,8 +334,9 @@ fn repair(
 /// rows' fans), so two seeds more than 2 (RINGS + 1) rings apart read nothing the other
 /// writes, and opening them at once gives what one after the other does.
 const BATCH_RINGS: usize = RINGS + 1;
-/// Most regions opened at once (each holds its own KKT system).
-const MAX_BATCH: usize = 64;
+/// Regions per thread of the pool in one batch: a cancellation is seen between batches, so
+/// it waits for about this many regions (each tens of milliseconds on a garment).
+const BATCH_PER_THREAD: usize = 4;
 
 /// The end of the batch that starts at `from`: every seed before it lies more than
 /// 2 BATCH_RINGS rings from every earlier seed of the batch (at least one seed is taken).
@@ -376,8 +377,9 @@ fn batch_end(
     scratch.near.resize(mesh.num_vertices(), false);
     scratch.seen.resize(mesh.num_vertices(), false);
     let mut marked = Vec::new();
+    let most = BATCH_PER_THREAD * rayon::current_num_threads().max(1);
     let mut end = from;
-    while end < seeds.len() && end - from < MAX_BATCH {
+    while end < seeds.len() && end - from < most {
         let ball = neighbourhood(&seeds[end], &mut scratch.seen);
         if end > from && ball.iter().any(|&v| scratch.near[v as usize]) {
             break;
