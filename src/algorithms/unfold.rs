@@ -8,7 +8,8 @@
 //! than a crease line. The constraint set θ = 2π leaves about two degrees of freedom per
 //! vertex, so such a pinch can usually be opened by moving its neighbourhood along the
 //! constraints. That is what this does, one fold at a time, and then likewise one sliver (a
-//! face with a corner below the task's minimum) at a time:
+//! face with a corner below the task's minimum) at a time (regions far enough apart to share
+//! nothing are opened at once on the rayon pool, with the result of one after the other):
 //!
 //! - Region: the vertices within [`RINGS`] edges of the fold's hinge (its two faces), or of
 //!   the sliver, that the
