@@ -261,12 +261,6 @@ fn repair(
         Seed::Fold(q) => is_fold(p, q),
         Seed::Sliver(f) => smallest_of(mesh, p, f) < task.min_corner,
     };
-    let seed_vertices = |seed: &Seed| -> Vec<u32> {
-        match seed {
-            Seed::Fold(q) => q.to_vec(),
-            Seed::Sliver(f) => mesh.triangles()[*f as usize].to_vec(),
-        }
-    };
     let mut next = 0;
     while next < seeds.len() {
         if control.cancelled() {
@@ -274,7 +268,7 @@ fn repair(
         }
         // The batch: the seeds from `next` on, up to the first whose neighbourhood meets an
         // earlier one's (BATCH_RINGS), with their regions.
-        let end = batch_end(mesh, seeds, next, &seed_vertices, scratch);
+        let end = batch_end(mesh, seeds, next, scratch);
         let mut batch: Vec<(&Seed, Region)> = Vec::new();
         for seed in &seeds[next..end] {
             *done += 1;
@@ -288,7 +282,7 @@ fn repair(
                 continue; // repaired by a neighbour's region
             }
             out.summary.tried += 1;
-            let Some(region) = Region::new(mesh, &seed_vertices(seed), RINGS, task, scratch) else {
+            let Some(region) = Region::new(mesh, seed.vertices(mesh), RINGS, task, scratch) else {
                 continue; // a neighbourhood too large (a hub of long fans)
             };
             if !region.verts.is_empty() {
@@ -341,18 +335,12 @@ const BATCH_PER_THREAD: usize = 4;
 
 /// The end of the batch that starts at `from`: every seed before it lies more than
 /// 2 BATCH_RINGS rings from every earlier seed of the batch (at least one seed is taken).
-fn batch_end(
-    mesh: &Mesh,
-    seeds: &[Seed],
-    from: usize,
-    seed_vertices: &dyn Fn(&Seed) -> Vec<u32>,
-    scratch: &mut Scratch,
-) -> usize {
+fn batch_end(mesh: &Mesh, seeds: &[Seed], from: usize, scratch: &mut Scratch) -> usize {
     let conn = mesh.conn();
     // The BATCH_RINGS neighbourhood of a seed, breadth first; `scratch.near` marks those of
     // the batch so far (cleared before returning).
     let neighbourhood = |seed: &Seed, seen: &mut Vec<bool>| -> Vec<u32> {
-        let mut ball = seed_vertices(seed);
+        let mut ball = seed.vertices(mesh).to_vec();
         ball.sort_unstable();
         ball.dedup();
         for &v in &ball {
@@ -457,6 +445,16 @@ impl Lower {
 enum Seed {
     Fold([u32; 4]),
     Sliver(u32),
+}
+
+impl Seed {
+    /// The hinge's four vertices, or the sliver's three.
+    fn vertices<'a>(&'a self, mesh: &'a Mesh) -> &'a [u32] {
+        match self {
+            Seed::Fold(q) => q,
+            Seed::Sliver(f) => &mesh.triangles()[*f as usize],
+        }
+    }
 }
 
 /// Smallest corner of face f at `p`.
@@ -1216,12 +1214,8 @@ mod tests {
             .iter()
             .filter_map(|&e| hinge_of(&mesh, e).map(Seed::Fold))
             .collect();
-        let vertices = |seed: &Seed| match seed {
-            Seed::Fold(q) => q.to_vec(),
-            Seed::Sliver(f) => mesh.triangles()[*f as usize].to_vec(),
-        };
         let mut scratch = Scratch::new(mesh.num_vertices());
-        assert_eq!(batch_end(&mesh, &seeds, 0, &vertices, &mut scratch), 2);
+        assert_eq!(batch_end(&mesh, &seeds, 0, &mut scratch), 2);
         let at_once =
             unfold(&mesh, mesh.positions(), &task(&folds), &Silent::default()).expect("runs");
         assert_eq!(at_once.summary.folds_before, 8);
