@@ -473,7 +473,7 @@ fn sliver_count(mesh: &Mesh, p: &[[f64; 3]], min_corner: f64) -> usize {
 }
 
 /// Edge e's hinge (i, j, k, l): faces (i, j, k) and (j, i, l), or None on the boundary.
-fn hinge_of(mesh: &Mesh, e: u32) -> Option<[u32; 4]> {
+pub(crate) fn hinge_of(mesh: &Mesh, e: u32) -> Option<[u32; 4]> {
     let f = *mesh.conn().edge_faces().get(e as usize)?;
     if f[1] == NONE {
         return None;

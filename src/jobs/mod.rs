@@ -198,7 +198,9 @@ impl Kind {
                  layout, auto: uv when the layout cuts the file's patches into a sewing \
                  pattern, as fl-mesh's patches; seams stay welded and move unless \
                  fix_boundary, never with local), closeness \
-                 (sqp: 1e-2), smoothness (sqp: 10, then 0 once flattenable), step_tolerance \
+                 (sqp: 1e-2), smoothness (sqp: 10, then 0 once flattenable), fold_barrier (sqp: 1; 0: \
+                 off; once flattenable, the hinges turning past 90 degrees or the input's own \
+                 angle are penalised), step_tolerance \
                  (sqp: 1e-4), stall_iterations (sqp: 40), restore=true|false (global and \
                  loop; sqp: true, penalty_cg: false; an unflattenable stall is followed by \
                  fl-mesh from the input, boundary fixed, and the same solver again from its \

@@ -114,6 +114,9 @@ pub struct Params {
     /// (over h̄²) until the mesh is flattenable, 0 from there on; 0: least stretch
     /// throughout.
     pub smoothness: f64,
+    /// `sqp`: weight β of the barrier β Σ_e (φ_e − t_e)₊² on the turning angles across edges
+    /// sharper than 90° (or than the input's own angle there) once flattenable; 0: off.
+    pub fold_barrier: f64,
     /// `sqp`: once flattenable, stop when a step (times 1 + σ, its trust-region shortening)
     /// moves no vertex more than this many mean edge lengths.
     pub step_tolerance: f64,
@@ -165,6 +168,7 @@ impl Default for Params {
             preconditioner: Preconditioner::None,
             closeness: 1e-2,
             smoothness: 10.0,
+            fold_barrier: 1.0,
             step_tolerance: 1e-4,
             stall_iterations: 40,
             restore: None,
@@ -220,6 +224,9 @@ impl Params {
         }
         if !(self.smoothness >= 0.0 && self.smoothness.is_finite()) {
             return Err(bad("smoothness", "must be finite and ≥ 0"));
+        }
+        if !(self.fold_barrier >= 0.0 && self.fold_barrier <= 1e6) {
+            return Err(bad("fold_barrier", "must be in [0, 1e6]"));
         }
         if !(self.step_tolerance > 0.0 && self.step_tolerance < 1.0) {
             return Err(bad("step_tolerance", "must be in (0, 1)"));
