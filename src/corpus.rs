@@ -128,7 +128,7 @@ pub fn pouch(cells: usize) -> Mesh {
 }
 
 /// A generated grid as a mesh of one patch called `name`.
-fn grid_mesh((positions, triangles, _): crate::fixtures::Grid, name: &str) -> Mesh {
+pub(crate) fn grid_mesh((positions, triangles, _): crate::fixtures::Grid, name: &str) -> Mesh {
     let n = triangles.len();
     let raw = RawMesh {
         positions,

@@ -971,31 +971,12 @@ impl Kkt {
 #[cfg(test)]
 mod tests {
     use super::HingeBarrier;
-    use crate::mesh::{Mesh, RawMesh};
+    use crate::mesh::Mesh;
 
-    /// A 4 × 3 grid of unit squares, each split in two, lying in z = 0.
-    fn grid() -> Mesh {
-        let (nx, ny) = (5u32, 4u32);
-        let positions = (0..ny)
-            .flat_map(|y| (0..nx).map(move |x| [x as f64, y as f64, 0.0]))
-            .collect();
-        let mut triangles = Vec::new();
-        for y in 0..ny - 1 {
-            for x in 0..nx - 1 {
-                let v = y * nx + x;
-                triangles.push([v, v + 1, v + nx + 1]);
-                triangles.push([v, v + nx + 1, v + nx]);
-            }
-        }
-        let nf = triangles.len();
-        let raw = RawMesh {
-            positions,
-            triangles,
-            face_patch: vec![0; nf],
-            patch_names: vec!["grid".into()],
-            uv: None,
-        };
-        Mesh::new(raw).expect("grid").0
+    /// A 4 × 3 grid of unit squares, each split in two, vertex (i, j) at `at(i, j, index)`.
+    fn grid(at: impl Fn(usize, usize, usize) -> [f64; 3]) -> Mesh {
+        let cells = crate::fixtures::grid(4, 3, false, |i, j| at(i, j, 5 * j + i), |_, _| true);
+        crate::corpus::grid_mesh(cells, "grid")
     }
 
     /// The gradient the barrier adds to ∇f is that of its value (central differences), on a
@@ -1003,20 +984,20 @@ mod tests {
     /// limit to 90°, and the flat grid itself costs nothing.
     #[test]
     fn barrier_gradient_matches_central_differences() {
-        let mesh = grid();
+        let mesh = grid(|i, j, _| [i as f64, j as f64, 0.0]);
         let v0 = mesh.positions().to_vec();
         let barrier = HingeBarrier::new(&mesh, &v0, 1.0);
         assert_eq!(barrier.value(&v0), 0.0);
-        let mut pos = v0.clone();
-        for (i, p) in pos.iter_mut().enumerate() {
-            // Alternate columns up and down by more than an edge: sharp folds.
-            p[2] = if (i % 5) % 2 == 0 {
+        // Alternate columns up and down by more than an edge: sharp folds.
+        let crumpled = grid(|i, j, v| {
+            let z = if i % 2 == 0 {
                 0.0
             } else {
-                1.6 + 0.1 * (i % 3) as f64
+                1.6 + 0.1 * (v % 3) as f64
             };
-            p[1] += 0.05 * (i % 4) as f64;
-        }
+            [i as f64, j as f64 + 0.05 * (v % 4) as f64, z]
+        });
+        let pos = crumpled.positions().to_vec();
         let mut grad = vec![[0.0; 3]; pos.len()];
         let mut active = 0;
         barrier.for_each_active(&pos, |q, r, g| {
@@ -1053,11 +1034,8 @@ mod tests {
     /// A hinge the input already bends past 90° is limited at its own angle, not pulled back.
     #[test]
     fn the_inputs_own_creases_are_free() {
-        let mesh = grid();
-        let mut v0 = mesh.positions().to_vec();
-        for (i, p) in v0.iter_mut().enumerate() {
-            p[2] = if (i % 5) % 2 == 0 { 0.0 } else { 1.6 };
-        }
+        let mesh = grid(|i, j, _| [i as f64, j as f64, if i % 2 == 0 { 0.0 } else { 1.6 }]);
+        let v0 = mesh.positions().to_vec();
         let barrier = HingeBarrier::new(&mesh, &v0, 1.0);
         assert!(barrier.limit.iter().any(|&t| t > 100f64.to_radians()));
         assert_eq!(barrier.value(&v0), 0.0);
