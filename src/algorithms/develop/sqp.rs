@@ -16,8 +16,9 @@
 //! note): converged 5 with κ = 0 throughout (the t-shirt stalls at 2.0e-2, δS 2.9 %), 9 with
 //! κ = 10 (the t-shirt 9.4e-7 with δS 9.9 %, gf_dress, pf_try3, bff_hemisphere newly).
 //! `smoothness = 0` is the least-stretch model throughout. Once flattenable, f also holds
-//! `fold_barrier` × Σ_e (φ_e − t_e)₊² over the hinges ([`HingeBarrier`]), so that the objective
-//! phase bends its steps away from folds instead of having them refused by the shape floor. Until 2026-11-29 an objective phase
+//! `fold_barrier` × Σ_e (φ_e − t_e)₊² over the hinges ([`HingeBarrier`]), so that the
+//! objective phase bends its steps away from folds instead of having them refused by the
+//! shape floor. Until 2026-11-29 an objective phase
 //! with κ = 10 (to its own stationary point) came between restoration and κ = 0; it bought
 //! nothing the κ = 0 phase does not (issue 16 note: on the 35-case subset, with backtracking,
 //! iterations 3498 → 3086, δS lower on 7 cases (saddle-2000-0.1 11.95 → 4.91 %), higher on
