@@ -1065,6 +1065,9 @@ fn detour(
         restore: Some(false),
         unfold: false,
         tolerance: Some(params.tolerance),
+        // fl-mesh goes on from the flattenable result; the corner barrier only lengthens
+        // develop's objective phase, which fl-mesh's own objective then replaces.
+        corner_barrier: 0.0,
         // Its own budget, as each retry's, within develop's default.
         max_iterations: params
             .max_iterations

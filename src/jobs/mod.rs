@@ -200,7 +200,9 @@ impl Kind {
                  fix_boundary, never with local), closeness \
                  (sqp: 1e-2), smoothness (sqp: 10, then 0 once flattenable), fold_barrier (sqp: 1; 0: \
                  off; once flattenable, the hinges turning past 90 degrees or the input's own \
-                 angle are penalised), step_tolerance \
+                 angle are penalised), corner_barrier (sqp: 1000; 0: off; once flattenable, \
+                 the corners closing below 3 degrees or the input's own corner are \
+                 penalised), step_tolerance \
                  (sqp: 1e-4), stall_iterations (sqp: 40), restore=true|false (global and \
                  loop; sqp: true, penalty_cg: false; an unflattenable stall is followed by \
                  fl-mesh from the input, boundary fixed, and the same solver again from its \

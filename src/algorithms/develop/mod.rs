@@ -117,6 +117,9 @@ pub struct Params {
     /// `sqp`: weight β of the barrier β Σ_e (φ_e − t_e)₊² on the turning angles across edges
     /// sharper than 90° (or than the input's own angle there) once flattenable; 0: off.
     pub fold_barrier: f64,
+    /// `sqp`: weight of the barrier Σ_c (t_c − a_c)₊² on the corner angles below 3° (or
+    /// below the input's own corner there) once flattenable; 0: off.
+    pub corner_barrier: f64,
     /// `sqp`: once flattenable, stop when a step (times 1 + σ, its trust-region shortening)
     /// moves no vertex more than this many mean edge lengths.
     pub step_tolerance: f64,
@@ -169,6 +172,7 @@ impl Default for Params {
             closeness: 1e-2,
             smoothness: 10.0,
             fold_barrier: 1.0,
+            corner_barrier: 1000.0,
             step_tolerance: 1e-4,
             stall_iterations: 40,
             restore: None,
@@ -227,6 +231,9 @@ impl Params {
         }
         if !(self.fold_barrier >= 0.0 && self.fold_barrier <= 1e6) {
             return Err(bad("fold_barrier", "must be in [0, 1e6]"));
+        }
+        if !(self.corner_barrier >= 0.0 && self.corner_barrier <= 1e9) {
+            return Err(bad("corner_barrier", "must be in [0, 1e9]"));
         }
         if !(self.step_tolerance > 0.0 && self.step_tolerance < 1.0) {
             return Err(bad("step_tolerance", "must be in (0, 1)"));
