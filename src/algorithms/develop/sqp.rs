@@ -20,9 +20,10 @@
 //! a_c)₊² over the corners ([`ShapeBarrier`]), so that the objective phase bends its steps
 //! away from folds and slivers instead of having them refused by the shape floor. Until
 //! 2026-11-29 an objective phase with κ = 10 (to its own stationary point) came between
-//! restoration and κ = 0; it bought nothing the κ = 0 phase does not (issue 16 note: on the 35-case subset, with backtracking,
-//! iterations 3498 → 3086, δS lower on 7 cases (saddle-2000-0.1 11.95 → 4.91 %), higher on
-//! 4 (mh_female_sportsuit01 26.99 → 30.22 %), folds fewer (gc_tee_sim 12 → 3)).
+//! restoration and κ = 0; it bought nothing the κ = 0 phase does not (issue 16 note: on the
+//! 35-case subset, with backtracking, iterations 3498 → 3086, δS lower on 7 cases
+//! (saddle-2000-0.1 11.95 → 4.91 %), higher on 4 (mh_female_sportsuit01 26.99 → 30.22 %),
+//! folds fewer (gc_tee_sim 12 → 3)).
 //!
 //! Each iteration solves the KKT system
 //!
@@ -568,8 +569,8 @@ impl ShapeFloor {
 ///   4210; γ = 100 and 10000 gave the t-shirt the same δS within 0.03 points.
 ///
 /// Gradients join ∇f; the Gauss–Newton Hessians 2β ∇φ∇φᵀ and 2γ ∇a∇aᵀ enter H as the
-/// block-diagonal majorisers k · 2β Σ_v ∇_vφ ∇_vφᵀ ((Σ_k a_k)² ≤ k Σ_k a_k² over a term's k
-/// vertices: 4 for a hinge, 3 for a corner), on blocks the pattern already has.
+/// block-diagonal majorisers k · 2w Σ_v ∇_v ∇_vᵀ (w = β or γ; (Σ_k a_k)² ≤ k Σ_k a_k² over a
+/// term's k vertices: 4 for a hinge, 3 for a corner), on blocks the pattern already has.
 struct ShapeBarrier {
     beta: f64,
     hinges: Vec<[u32; 4]>,
@@ -641,6 +642,10 @@ impl ShapeBarrier {
             let angle = crate::geometry::corner_angle(a, b, c);
             if angle < t {
                 let (gb, gc) = corner_angle_gradient(a, b, c);
+                // A degenerate face has no gradient (the trials refuse such faces anyway).
+                if !gb.iter().chain(&gc).all(|x| x.is_finite()) {
+                    continue;
+                }
                 let ga = [0, 1, 2].map(|i| -(gb[i] + gc[i]));
                 visit(&q, -2.0 * self.gamma * (t - angle), &[ga, gb, gc]);
             }
