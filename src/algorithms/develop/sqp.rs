@@ -628,13 +628,18 @@ impl ShapeBarrier {
         self.beta * hinges + self.gamma * corners
     }
 
-    /// Each term past its limit: its vertices, the derivative of its value with respect to
-    /// its angle, and that angle's gradient (the corner's at its vertex and the next two).
-    fn for_each_active(&self, pos: &[[f64; 3]], mut visit: impl FnMut(&[u32], f64, &[[f64; 3]])) {
+    /// Each term past its limit: its vertices, its weight (β or γ), the derivative of its
+    /// value with respect to its angle, and that angle's gradient (the corner's at its vertex
+    /// and the next two).
+    fn for_each_active(
+        &self,
+        pos: &[[f64; 3]],
+        mut visit: impl FnMut(&[u32], f64, f64, &[[f64; 3]]),
+    ) {
         for (&q, &t) in self.hinges.iter().zip(&self.limit) {
             let (phi, grad) = turning_at(pos, q);
             if phi > t {
-                visit(&q, 2.0 * self.beta * (phi - t), &grad);
+                visit(&q, self.beta, 2.0 * self.beta * (phi - t), &grad);
             }
         }
         for &(q, t) in &self.corners {
@@ -647,7 +652,12 @@ impl ShapeBarrier {
                     continue;
                 }
                 let ga = [0, 1, 2].map(|i| -(gb[i] + gc[i]));
-                visit(&q, -2.0 * self.gamma * (t - angle), &[ga, gb, gc]);
+                visit(
+                    &q,
+                    self.gamma,
+                    -2.0 * self.gamma * (t - angle),
+                    &[ga, gb, gc],
+                );
             }
         }
     }
@@ -656,8 +666,8 @@ impl ShapeBarrier {
     /// units of h̄ (as E's: the gradient times h̄, the Hessian times h̄²).
     fn add_to(&self, pos: &[[f64; 3]], h: f64, kkt: &mut Kkt) {
         let dim = kkt.rhs.len() / 2;
-        self.for_each_active(pos, |q, r, grad| {
-            let w = if q.len() == 4 { self.beta } else { self.gamma };
+        self.for_each_active(pos, |q, w, r, grad| {
+            // (Σ_k a_k)² ≤ k Σ_k a_k² over the term's k vertices.
             let majoriser = q.len() as f64 * h * h * 2.0 * w;
             for (gv, &v) in grad.iter().zip(q) {
                 let s = kkt.slot[v as usize];
@@ -1038,7 +1048,7 @@ mod tests {
     fn check_gradient(barrier: &ShapeBarrier, pos: &[[f64; 3]], terms: usize) {
         let mut grad = vec![[0.0; 3]; pos.len()];
         let mut active = 0;
-        barrier.for_each_active(pos, |q, r, g| {
+        barrier.for_each_active(pos, |q, _, r, g| {
             active += 1;
             for (gv, &v) in g.iter().zip(q) {
                 for k in 0..3 {
