@@ -91,7 +91,11 @@
 //! no δS of the 35-case subset by more than 0.01 % points (ten → four iterations: 3086 → 2978
 //! iterations; four → two, 2026-11-29: 2892 → 2832, the t-shirt 50 → 48); `stall`
 //! when g_max has not halved in `stall_iterations`;
-//! `line_search` when λ passes 1e8. The best iterate is returned: the feasible one with the
+//! `line_search` when λ passes 1e8, or when the objective phase's σ passes 1e6 while its
+//! unshortened step is still longer than `step_tolerance` (the shape floor or the constraints
+//! refused every step: flattenable, not stationary, and the detail says so; found on
+//! mh_male_worksuit01 with the corner barrier at 6°, issue 16 note 2026-11-30, where such a
+//! stop was reported as `tolerance`). The best iterate is returned: the feasible one with the
 //! least f, else the one with the least g_max.
 
 // Index loops over xyz read like the equations they implement.
@@ -220,6 +224,8 @@ pub(super) fn run(
     let mut f_ring = [0.0; CREEP_WINDOW];
     let mut objective_its = 0usize;
     let mut shape_floor: Option<ShapeFloor> = None;
+    // The unshortened step's length (h̄) when the objective phase's trust region collapsed.
+    let mut collapsed: Option<f64> = None;
     for it in 1..=params.max_iterations {
         if control.cancelled_before(kkt.solver.predicted_factor_seconds()) {
             return Err(AlgoError::Cancelled);
@@ -494,6 +500,15 @@ pub(super) fn run(
             let creeping = objective_its >= CREEP_WINDOW && f_ring[slot] - f < CREEP * f;
             f_ring[slot] = f;
             objective_its += 1;
+            // A collapsed trust region is stationary only if the unshortened step is short
+            // too; otherwise the shape floor or the constraints refused every step (seen on
+            // a crumpled garment: σ 10 → 1e6 in three iterations, Newton step 52 h̄).
+            let newton = step_max * (1.0 + sigma_now);
+            if sigma > SIGMA_MAX && newton > params.step_tolerance {
+                run.stop = Stop::LineSearch;
+                collapsed = Some(newton);
+                break;
+            }
             if creeping
                 || sigma > SIGMA_MAX
                 || (accepted && alpha * step_max * (1.0 + sigma_now) <= params.step_tolerance)
@@ -519,10 +534,16 @@ pub(super) fn run(
     }
     if run.g_max <= tol && run.stop != Stop::Tolerance {
         // Flattenable but not yet stationary: still a usable answer; say so.
+        let why = match collapsed {
+            Some(newton) => format!(
+                "line_search: no step the shape floor and the constraints accept; the trust \
+                 region collapsed with the unshortened step {newton:.3} mean edge lengths"
+            ),
+            None => run.stop.as_str().to_string(),
+        };
         run.stop_detail = format!(
-            "flattenable after {} iterations, not yet stationary ({})",
+            "flattenable after {} iterations, not yet stationary ({why})",
             run.best_iteration,
-            run.stop.as_str()
         );
     }
     Ok(run)
