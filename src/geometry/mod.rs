@@ -221,6 +221,115 @@ pub fn corner_angle_gradient(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> ([f64; 3]
     )
 }
 
+/// Second derivatives of the corner angle α at `a` in triangle (a, b, c), in terms of
+/// u = b − a and w = c − a: blocks ∂²α/∂u², ∂²α/∂u∂w and ∂²α/∂w² (the blocks for a follow
+/// from ∂/∂a = −∂/∂u − ∂/∂w). With t_u the in-plane unit normal of u toward w, t_w that of w
+/// toward u's side reflected (n̂ × ŵ) and n̂ the face normal:
+///
+/// ```text
+/// ∂²α/∂u²  =  (û t_uᵀ + t_u ûᵀ)/|u|² + cot α/|u|² n̂n̂ᵀ      (in plane α = arg w − arg u)
+/// ∂²α/∂w²  = −(ŵ t_wᵀ + t_w ŵᵀ)/|w|² + cot α/|w|² n̂n̂ᵀ
+/// ∂²α/∂u∂w = −1/(|u||w| sin α) n̂n̂ᵀ                          (out of plane only)
+/// ```
+///
+/// The in-plane and out-of-plane parts decouple (α is even in the out-of-plane components),
+/// so with `positive_part_of = Some(y)` it returns the positive semidefinite part of y ∇²α
+/// instead, block by block in closed form: the convexified constraint curvature of a
+/// Lagrangian. `None` for a degenerate corner.
+pub fn corner_angle_hessian(
+    a: [f64; 3],
+    b: [f64; 3],
+    c: [f64; 3],
+    positive_part_of: Option<f64>,
+) -> Option<[[[f64; 3]; 3]; 3]> {
+    let u = sub(b, a);
+    let w = sub(c, a);
+    let (lu, lw) = (dot(u, u).sqrt(), dot(w, w).sqrt());
+    let n = cross(u, w);
+    let ln = dot(n, n).sqrt();
+    if !(lu > 0.0 && lw > 0.0 && ln > 0.0 && ln.is_finite()) {
+        return None;
+    }
+    let uh = u.map(|x| x / lu);
+    let wh = w.map(|x| x / lw);
+    let nh = n.map(|x| x / ln);
+    let tu = cross(nh, uh);
+    let tw = cross(nh, wh);
+    let sin = ln / (lu * lw);
+    let cot = dot(u, w) / ln;
+    let outer = |p: [f64; 3], q: [f64; 3], k: f64| {
+        let mut m = [[0.0; 3]; 3];
+        for i in 0..3 {
+            for j in 0..3 {
+                m[i][j] = k * p[i] * q[j];
+            }
+        }
+        m
+    };
+    let add = |m: &mut [[f64; 3]; 3], o: [[f64; 3]; 3]| {
+        for i in 0..3 {
+            for j in 0..3 {
+                m[i][j] += o[i][j];
+            }
+        }
+    };
+    // Out of plane: [[cot/|u|², −1/(|u||w| sin)], [·, cot/|w|²]] on (n̂·δu, n̂·δw).
+    let (p, q, r) = (cot / (lu * lu), -1.0 / (lu * lw * sin), cot / (lw * lw));
+    let (mut uu, mut uw, mut ww) = ([[0.0; 3]; 3], [[0.0; 3]; 3], [[0.0; 3]; 3]);
+    match positive_part_of {
+        None => {
+            add(&mut uu, outer(uh, tu, 1.0 / (lu * lu)));
+            add(&mut uu, outer(tu, uh, 1.0 / (lu * lu)));
+            add(&mut ww, outer(wh, tw, -1.0 / (lw * lw)));
+            add(&mut ww, outer(tw, wh, -1.0 / (lw * lw)));
+            add(&mut uu, outer(nh, nh, p));
+            add(&mut uw, outer(nh, nh, q));
+            add(&mut ww, outer(nh, nh, r));
+        }
+        Some(y) => {
+            // y(û t_uᵀ + t_u ûᵀ)/|u|² has eigenvalues ±y/|u|² on (û ± t_u)/√2.
+            let s = y.signum();
+            let vu = [0, 1, 2].map(|i| uh[i] + s * tu[i]);
+            let vw = [0, 1, 2].map(|i| wh[i] - s * tw[i]);
+            add(&mut uu, outer(vu, vu, 0.5 * y.abs() / (lu * lu)));
+            add(&mut ww, outer(vw, vw, 0.5 * y.abs() / (lw * lw)));
+            let (p, q, r) = (y * p, y * q, y * r);
+            let mean = 0.5 * (p + r);
+            let radius = (0.25 * (p - r) * (p - r) + q * q).sqrt();
+            let (hi, lo) = (mean + radius, mean - radius);
+            let (pp, qq, rr) = if lo >= 0.0 {
+                (p, q, r)
+            } else if hi <= 0.0 {
+                (0.0, 0.0, 0.0)
+            } else {
+                // hi times the projector on its eigenvector (q, hi − p) or (hi − r, q).
+                let (e0, e1) = if (hi - p).abs() + q.abs() >= (hi - r).abs() + q.abs() {
+                    (q, hi - p)
+                } else {
+                    (hi - r, q)
+                };
+                let norm = e0 * e0 + e1 * e1;
+                if norm > 0.0 {
+                    (
+                        hi * e0 * e0 / norm,
+                        hi * e0 * e1 / norm,
+                        hi * e1 * e1 / norm,
+                    )
+                } else {
+                    (hi, 0.0, hi)
+                }
+            };
+            add(&mut uu, outer(nh, nh, pp));
+            add(&mut uw, outer(nh, nh, qq));
+            add(&mut ww, outer(nh, nh, rr));
+        }
+    }
+    let all = [uu, uw, ww];
+    all.iter()
+        .all(|m| m.iter().flatten().all(|x| x.is_finite()))
+        .then_some(all)
+}
+
 /// Analytic gradient of θ(q) with respect to q itself (Prop. 1, Eq. 12) and to each
 /// neighbour p (Prop. 2, Eq. 13). Writes `(vertex, gradient)` pairs into `out`: first q, then
 /// its ring neighbours in counter-clockwise order.

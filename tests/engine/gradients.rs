@@ -227,3 +227,67 @@ fn turning_angle_gradient_matches_finite_differences() {
     }
     assert!(checked > 100, "only {checked} hinges checked");
 }
+
+/// The 6×6 matrix of `corner_angle_hessian`'s blocks in (u, w) = (b − a, c − a).
+fn hessian6(h: &[[[f64; 3]; 3]; 3]) -> [[f64; 6]; 6] {
+    let mut m = [[0.0; 6]; 6];
+    for i in 0..3 {
+        for j in 0..3 {
+            m[i][j] = h[0][i][j];
+            m[i][3 + j] = h[1][i][j];
+            m[3 + j][i] = h[1][i][j];
+            m[3 + i][3 + j] = h[2][i][j];
+        }
+    }
+    m
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(300))]
+
+    /// ∂²α against second central differences of the angle itself (atan2, not the gradient
+    /// code), and the positive part of y∇²α: positive semidefinite and ≥ y∇²α (the
+    /// difference is positive semidefinite), checked on random directions.
+    #[test]
+    fn corner_angle_hessian_matches_finite_differences(
+        pts in proptest::collection::vec(-1.0f64..1.0, 9),
+        y in -3.0f64..3.0,
+        dirs in proptest::collection::vec(-1.0f64..1.0, 60),
+    ) {
+        let a = [pts[0], pts[1], pts[2]];
+        let b = [pts[3], pts[4], pts[5]];
+        let c = [pts[6], pts[7], pts[8]];
+        let alpha = angle(a, b, c);
+        prop_assume!(alpha > 0.2 && alpha < std::f64::consts::PI - 0.2);
+        prop_assume!(norm(sub(b, a)) > 0.2 && norm(sub(c, a)) > 0.2);
+        let h = flatmesh::geometry::corner_angle_hessian(a, b, c, None).unwrap();
+        let m = hessian6(&h);
+        let f = |x: &[f64; 6]| {
+            angle([0.0; 3], [b[0] - a[0] + x[0], b[1] - a[1] + x[1], b[2] - a[2] + x[2]],
+                  [c[0] - a[0] + x[3], c[1] - a[1] + x[4], c[2] - a[2] + x[5]])
+        };
+        let e = 1e-4;
+        for i in 0..6 {
+            for j in 0..6 {
+                let at = |si: f64, sj: f64| {
+                    let mut x = [0.0; 6];
+                    x[i] += si * e;
+                    x[j] += sj * e;
+                    f(&x)
+                };
+                let fd = (at(1.0, 1.0) - at(1.0, -1.0) - at(-1.0, 1.0) + at(-1.0, -1.0)) / (4.0 * e * e);
+                prop_assert!((m[i][j] - fd).abs() <= 1e-5 * (1.0 + fd.abs()),
+                    "({i},{j}): analytic {} vs FD {fd}", m[i][j]);
+            }
+        }
+        let p = hessian6(&flatmesh::geometry::corner_angle_hessian(a, b, c, Some(y)).unwrap());
+        for d in dirs.chunks(6) {
+            let quad = |m: &[[f64; 6]; 6]| -> f64 {
+                (0..6).map(|i| (0..6).map(|j| d[i] * m[i][j] * d[j]).sum::<f64>()).sum()
+            };
+            let (qp, qm) = (quad(&p), y * quad(&m));
+            prop_assert!(qp >= -1e-9 * (1.0 + qm.abs()), "not PSD: {qp}");
+            prop_assert!(qp >= qm - 1e-9 * (1.0 + qm.abs()), "below y∇²α: {qp} < {qm}");
+        }
+    }
+}

@@ -65,6 +65,21 @@
 //! 13 (saddle-2000-0.1 12.9 → 12.0 %), higher on 6 (saddle-7700-0.1 11.8 → 14.8 %, the rest
 //! by at most 0.16 % points).
 //!
+//! In the objective phase H also holds the constraints' curvature, the rest of the Hessian
+//! of the Lagrangian f + yᵀ(θ − 2π): Σ_c (y_c ∇²α_c)₊ over the corners at constrained
+//! vertices, y the multipliers of the previous iteration's solve and each corner's term
+//! replaced by its positive semidefinite part in closed form ([`corner_angle_hessian`]), so H
+//! stays positive definite and the pattern is unchanged. Why: E's Gauss–Newton Hessian is
+//! blind to bending (an isometric bend leaves every edge length), and there the constraints'
+//! curvature is all the curvature there is; |y| reaches 50–90 on the t-shirt, so the term
+//! outweighs H's O(1) diagonal, and without it σ stood in for it at 8–380 (steps of
+//! 0.004–0.06 h̄, f falling as in gradient descent). Measured (issue 16 note, 2026-11-30) on
+//! the 35-case subset: Σ δS 191.2 → 155.9 % points, folds left 12 → 9, all still
+//! converged, δS lower on 13 cases (saddle-7700-0.01 13.56 → 6.62 %, mh_shoes01 66.0 →
+//! 50.0 %, gc_tee_sim 9.66 → 6.87 %, the t-shirt 8.34 → 7.91 % in the same 200 iterations),
+//! higher on 2 (fixture-hemisphere_cap 7.76 → 8.40 %, its smallest corner 3.0 → 18.1°;
+//! dome-2000-0.1 3.00 → 3.10 %); σ now stays at 1–40 on the t-shirt.
+//!
 //! The objective phase replaced (issue 16 note, 2026-11-26) a step weight w halved
 //! after each refusal with λ left where restoration ended and κ lowered ÷ 10 at each stationary
 //! point: E's Gauss–Newton Hessian ignores the constraints' curvature, so the undamped step was
@@ -104,7 +119,9 @@
 use super::energy::{g_max, Model};
 use super::{HistoryEntry, Params, Run, Stop};
 use crate::algorithms::{AlgoError, Control, Progress};
-use crate::geometry::{corner_angle_gradient, fold_count_at, smallest_corner_at, SLIVER_DEGREES};
+use crate::geometry::{
+    corner_angle_gradient, corner_angle_hessian, fold_count_at, smallest_corner_at, SLIVER_DEGREES,
+};
 use crate::linalg::LdltSolver;
 use crate::mesh::{dot, is_degenerate_triangle, sub, Mesh, NONE};
 
@@ -287,6 +304,14 @@ pub(super) fn run(
             run.stop = Stop::LineSearch;
             run.stop_detail = format!("{e}; the best iterate is returned");
             break;
+        }
+        if feasible_now {
+            // y = y_n + y_t of the step δ_n + δ_t: the next fill's constraint curvature.
+            let (normal, tangential) = kkt.rhs.split_at(dim);
+            for (c, y) in kkt.multipliers.iter_mut().enumerate() {
+                *y = normal[m3 + c] + tangential[m3 + c];
+            }
+            kkt.curvature = true;
         }
         // The objective's part may not spoil the predicted fall of Σ(2π − θ)² by more than
         // half (with λ > 0 it is not exactly tangent to the constraints).
@@ -764,6 +789,13 @@ pub(super) struct Kkt {
     solver: LdltSolver,
     rhs: Vec<f64>,
     step: Vec<f64>,
+    /// The multipliers y of the last objective-phase solve, one per constraint, whose
+    /// constraint curvature Σ_c (y_c ∇²α_c)₊ `fill` adds to H when `curvature` is set.
+    multipliers: Vec<f64>,
+    curvature: bool,
+    /// Each corner's curvature term convexified (false only in a test, which checks the
+    /// exact Σ y_c ∇²α_c against finite differences of Σ y_i ∇θ_i).
+    positive_part: bool,
 }
 
 impl Kkt {
@@ -868,6 +900,7 @@ impl Kkt {
                 }
             })
             .collect();
+        let ncons = cons.len();
         let solver = LdltSolver::new(dim, &entries, signs, Some(&groups))
             .map_err(|e| AlgoError::Input(format!("KKT system: {e}")))?;
         Ok(Kkt {
@@ -885,10 +918,14 @@ impl Kkt {
             solver,
             rhs: vec![0.0; 2 * dim],
             step: vec![0.0; 3 * m],
+            multipliers: vec![0.0; ncons],
+            curvature: false,
+            positive_part: true,
         })
     }
 
-    /// H (Gauss–Newton, times h̄²) and h̄Λ at `pos`, then the numeric factorisation.
+    /// H (Gauss–Newton, times h̄², with the constraint curvature once `curvature` is set) and
+    /// h̄Λ at `pos`, then the numeric factorisation.
     pub(super) fn fill(
         &mut self,
         model: &Model<'_>,
@@ -960,6 +997,9 @@ impl Kkt {
                 }
             }
         }
+        if self.curvature {
+            self.add_constraint_curvature(model, pos, h);
+        }
         for c in 0..self.cons.len() {
             self.values[self.reg_at + c] = -(REGULARISATION + damping);
         }
@@ -971,6 +1011,60 @@ impl Kkt {
         self.solver
             .factor(&self.values)
             .map_err(|e| AlgoError::Input(format!("KKT factorisation: {e}")))
+    }
+
+    /// Σ_c h̄² (y_c ∇²α_c)₊ over the corners at constrained vertices: the constraints'
+    /// curvature in the Hessian of the Lagrangian f + yᵀ(θ − 2π), each corner's term replaced
+    /// by its positive semidefinite part ([`corner_angle_hessian`]) so that H stays positive
+    /// definite and the pattern (a corner couples its triangle's vertices, already coupled by
+    /// edges) does not change.
+    fn add_constraint_curvature(&mut self, model: &Model<'_>, pos: &[[f64; 3]], h: f64) {
+        let mesh = model.mesh();
+        for (f, t) in mesh.triangles().iter().enumerate() {
+            for k in 0..3 {
+                let (c, slots) = self.corner_slots[3 * f + k];
+                if c == NONE || self.multipliers[c as usize] == 0.0 {
+                    continue;
+                }
+                let y = self.multipliers[c as usize] * h * h;
+                let p = [0, 1, 2].map(|x| pos[t[(k + x) % 3] as usize]);
+                let Some(block) = corner_blocks(p, y, self.positive_part) else {
+                    continue;
+                };
+                for x in 0..3 {
+                    if slots[x] == NONE {
+                        continue;
+                    }
+                    let at = self.diag_at[slots[x] as usize];
+                    let mut idx = 0;
+                    for i in 0..3 {
+                        for j in 0..=i {
+                            self.values[at + idx] += block[x][x][i][j];
+                            idx += 1;
+                        }
+                    }
+                }
+                for x in 0..3 {
+                    let z = (x + 1) % 3;
+                    if slots[x] == NONE || slots[z] == NONE {
+                        continue;
+                    }
+                    // Half-edge 3f + j runs from corner j to corner j + 1.
+                    let edge = mesh.conn().edge_of((3 * f + (k + x) % 3) as u32);
+                    let at = self.edge_at[edge as usize];
+                    if at == usize::MAX {
+                        continue;
+                    }
+                    // The edge's block is (3·hi + i, 3·lo + j) for its higher and lower slot.
+                    let (hi, lo) = if slots[x] > slots[z] { (x, z) } else { (z, x) };
+                    for i in 0..3 {
+                        for j in 0..3 {
+                            self.values[at + 3 * i + j] += block[hi][lo][i][j];
+                        }
+                    }
+                }
+            }
+        }
     }
 
     /// Solve for the two right-hand sides in `rhs` (normal, then tangential), overwritten by
@@ -1052,6 +1146,33 @@ impl Kkt {
     }
 }
 
+/// (y ∇²α)₊ (or y ∇²α itself) of the corner at p[0] in triangle p as 3 × 3 blocks over its three vertices,
+/// block[x][z][i][j] = ∂²/∂p_x,i ∂p_z,j, from the blocks over (u, w) = (p₁ − p₀, p₂ − p₀)
+/// (∂/∂p₀ = −∂/∂u − ∂/∂w). `None` for a degenerate corner.
+fn corner_blocks(p: [[f64; 3]; 3], y: f64, positive_part: bool) -> Option<[[[[f64; 3]; 3]; 3]; 3]> {
+    let [uu, uw, ww] = if positive_part {
+        corner_angle_hessian(p[0], p[1], p[2], Some(y))?
+    } else {
+        corner_angle_hessian(p[0], p[1], p[2], None)?.map(|m| m.map(|r| r.map(|x| y * x)))
+    };
+    let mut b = [[[[0.0; 3]; 3]; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            let wu = uw[j][i];
+            b[1][1][i][j] = uu[i][j];
+            b[2][2][i][j] = ww[i][j];
+            b[1][2][i][j] = uw[i][j];
+            b[2][1][i][j] = wu;
+            b[0][1][i][j] = -(uu[i][j] + wu);
+            b[1][0][i][j] = -(uu[i][j] + uw[i][j]);
+            b[0][2][i][j] = -(uw[i][j] + ww[i][j]);
+            b[2][0][i][j] = -(wu + ww[i][j]);
+            b[0][0][i][j] = uu[i][j] + uw[i][j] + wu + ww[i][j];
+        }
+    }
+    Some(b)
+}
+
 #[cfg(test)]
 mod tests {
     use super::ShapeBarrier;
@@ -1095,6 +1216,107 @@ mod tests {
                     (fd - grad[v][k]).abs() <= 1e-6 * scale,
                     "vertex {v} axis {k}: analytic {} against {fd}",
                     grad[v][k]
+                );
+            }
+        }
+    }
+
+    /// The constraint curvature `fill` adds, assembled with the exact corner Hessians, times
+    /// a random direction against central differences of Σ_i y_i ∇θ_i (the angle-sum
+    /// gradients of Props. 1–2, an independent code path) on a noisy grid.
+    #[test]
+    fn constraint_curvature_matches_central_differences() {
+        use super::{Kkt, Model, NONE};
+        let noise = |v: usize, k: usize| ((v * 7 + k * 3) as f64 * 0.9).sin() * 0.3;
+        let mesh = grid(|i, j, v| [i as f64 + noise(v, 0), j as f64 + noise(v, 1), noise(v, 2)]);
+        let model = Model::new(&mesh);
+        let n = mesh.num_vertices();
+        let mut kkt = Kkt::new(
+            &model,
+            &vec![true; n],
+            &crate::algorithms::Silent::default(),
+        )
+        .expect("KKT system");
+        assert!(kkt.cons.len() >= 4, "{} constraints", kkt.cons.len());
+        let pos = mesh.positions().to_vec();
+        kkt.fill(&model, &pos, 1.0, 0.5, 0.0, 0.0)
+            .expect("factorises");
+        let plain = kkt.values.clone();
+        for (c, y) in kkt.multipliers.iter_mut().enumerate() {
+            *y = 1.5 * ((c as f64) * 1.3).cos();
+        }
+        kkt.curvature = true;
+        kkt.positive_part = false;
+        // The exact Hessian is indefinite; only its values are read.
+        let _ = kkt.fill(&model, &pos, 1.0, 0.5, 0.0, 0.0);
+        let added: Vec<f64> = kkt.values.iter().zip(&plain).map(|(a, b)| a - b).collect();
+        let dir: Vec<[f64; 3]> = (0..n)
+            .map(|v| [0, 1, 2].map(|k| ((v * 5 + k * 11) as f64 * 1.7).cos()))
+            .collect();
+        let mut hv = vec![[0.0; 3]; n];
+        for (s, &at) in kkt.diag_at.iter().enumerate() {
+            let v = kkt.verts[s] as usize;
+            let lower = [(0, 0), (1, 0), (1, 1), (2, 0), (2, 1), (2, 2)];
+            for (idx, &(i, j)) in lower.iter().enumerate() {
+                hv[v][i] += added[at + idx] * dir[v][j];
+                if i != j {
+                    hv[v][j] += added[at + idx] * dir[v][i];
+                }
+            }
+        }
+        for (e, ends) in mesh.conn().edges().iter().enumerate() {
+            let at = kkt.edge_at[e];
+            if at == usize::MAX {
+                continue;
+            }
+            let (sa, sb) = (kkt.slot[ends[0] as usize], kkt.slot[ends[1] as usize]);
+            assert!(sa != NONE && sb != NONE);
+            let (hi, lo) = if sa > sb {
+                (ends[0], ends[1])
+            } else {
+                (ends[1], ends[0])
+            };
+            let (hi, lo) = (hi as usize, lo as usize);
+            for i in 0..3 {
+                for j in 0..3 {
+                    hv[hi][i] += added[at + 3 * i + j] * dir[lo][j];
+                    hv[lo][j] += added[at + 3 * i + j] * dir[hi][i];
+                }
+            }
+        }
+        let weighted_gradient = |p: &[[f64; 3]]| {
+            let mut g = vec![[0.0; 3]; n];
+            let mut out = Vec::new();
+            for (c, &q) in kkt.cons.iter().enumerate() {
+                crate::geometry::theta_gradient_with(&mesh, p, q, &mut out);
+                for &(v, d) in &out {
+                    for k in 0..3 {
+                        g[v as usize][k] += kkt.multipliers[c] * d[k];
+                    }
+                }
+            }
+            g
+        };
+        let eps = 1e-5;
+        let moved = |t: f64| -> Vec<[f64; 3]> {
+            pos.iter()
+                .zip(&dir)
+                .map(|(p, d)| [0, 1, 2].map(|k| p[k] + t * d[k]))
+                .collect()
+        };
+        let (up, down) = (
+            weighted_gradient(&moved(eps)),
+            weighted_gradient(&moved(-eps)),
+        );
+        let scale = hv.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
+        assert!(scale > 0.1, "the curvature term is empty");
+        for v in 0..n {
+            for k in 0..3 {
+                let fd = (up[v][k] - down[v][k]) / (2.0 * eps);
+                assert!(
+                    (fd - hv[v][k]).abs() <= 1e-6 * scale,
+                    "vertex {v} axis {k}: assembled {} against {fd}",
+                    hv[v][k]
                 );
             }
         }
