@@ -223,8 +223,8 @@ pub fn corner_angle_gradient(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> ([f64; 3]
 
 /// Second derivatives of the corner angle α at `a` in triangle (a, b, c), in terms of
 /// u = b − a and w = c − a: blocks ∂²α/∂u², ∂²α/∂u∂w and ∂²α/∂w² (the blocks for a follow
-/// from ∂/∂a = −∂/∂u − ∂/∂w). With t_u the in-plane unit normal of u toward w, t_w that of w
-/// toward u's side reflected (n̂ × ŵ) and n̂ the face normal:
+/// from ∂/∂a = −∂/∂u − ∂/∂w). With n̂ the face normal and t_u = n̂ × û, t_w = n̂ × ŵ (û and
+/// ŵ turned a quarter turn about n̂; t_u points to w's side):
 ///
 /// ```text
 /// ∂²α/∂u²  =  (û t_uᵀ + t_u ûᵀ)/|u|² + cot α/|u|² n̂n̂ᵀ      (in plane α = arg w − arg u)
