@@ -1179,9 +1179,9 @@ impl Kkt {
     }
 }
 
-/// (y ∇²α)₊ (or y ∇²α itself) of the corner at p[0] in triangle p as 3 × 3 blocks over its three vertices,
-/// block[x][z][i][j] = ∂²/∂p_x,i ∂p_z,j, from the blocks over (u, w) = (p₁ − p₀, p₂ − p₀)
-/// (∂/∂p₀ = −∂/∂u − ∂/∂w). `None` for a degenerate corner.
+/// (y ∇²α)₊ (or y ∇²α itself) of the corner at p[0] in triangle p as 3 × 3 blocks over its
+/// three vertices, block[x][z][i][j] = ∂²/∂p_x,i ∂p_z,j, from the blocks over
+/// (u, w) = (p₁ − p₀, p₂ − p₀) (∂/∂p₀ = −∂/∂u − ∂/∂w). `None` for a degenerate corner.
 fn corner_blocks(p: [[f64; 3]; 3], y: f64, positive_part: bool) -> Option<[[[[f64; 3]; 3]; 3]; 3]> {
     let [uu, uw, ww] = if positive_part {
         corner_angle_hessian(p[0], p[1], p[2], Some(y))?
